@@ -1,0 +1,1 @@
+"""Subcommands of the ``twin`` command; each module exposes ``register(subparsers)``."""

@@ -1,0 +1,17 @@
+"""The project's error types.
+
+Every error a user can cause is a ``TwinError``: its message is one line that names what is wrong
+and what to do. The command line prints that line and exits with status 2 instead of a traceback.
+"""
+
+
+class TwinError(Exception):
+    """Base of all errors meant for the user: one line, names the problem and the remedy."""
+
+
+class InputError(TwinError, ValueError):
+    """An argument or file content is out of its range, of the wrong shape, or not finite."""
+
+
+class FileFormatError(TwinError):
+    """A saved file is corrupt, of another kind, or of an unsupported format version."""

@@ -1,0 +1,97 @@
+"""Atomic files, and the project's array-file format: ``.npz`` arrays plus a JSON header.
+
+Grids and detector models are both saved this way. The header (format name, version and any
+metadata) is stored as a UTF-8 JSON byte array inside the same ``.npz``, so one file carries both
+and ``allow_pickle=False`` is enough to read it safely.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import tempfile
+import zipfile
+from collections.abc import Callable, Mapping
+from pathlib import Path
+from typing import IO, Any
+
+import numpy as np
+
+from twin.errors import FileFormatError
+
+_HEADER_KEY = "__header__"
+
+
+def write_atomic(path: str | os.PathLike[str], write: Callable[[IO[bytes]], None]) -> Path:
+    """Write a file through ``write(fileobj)`` so that readers see the old file or the new one.
+
+    The bytes go to a temporary file in the same directory, are flushed to disk, and only then
+    renamed over ``path``; an interrupted write leaves the previous file intact.
+    """
+    target = Path(path)
+    target.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp_name = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".tmp", dir=target.parent)
+    try:
+        with os.fdopen(fd, "wb") as handle:
+            write(handle)
+            handle.flush()
+            os.fsync(handle.fileno())
+        os.replace(tmp_name, target)
+    except BaseException:
+        Path(tmp_name).unlink(missing_ok=True)
+        raise
+    return target
+
+
+def write_text_atomic(path: str | os.PathLike[str], text: str) -> Path:
+    """Write UTF-8 text atomically (see ``write_atomic``)."""
+    return write_atomic(path, lambda handle: handle.write(text.encode("utf-8")))
+
+
+def save_arrays(
+    path: str | os.PathLike[str],
+    kind: str,
+    version: int,
+    header: Mapping[str, Any],
+    arrays: Mapping[str, np.ndarray],
+) -> Path:
+    """Save ``arrays`` and a JSON ``header`` tagged with a format ``kind`` and ``version``."""
+    if _HEADER_KEY in arrays:
+        raise ValueError(f"array name {_HEADER_KEY!r} is reserved for the header")
+    full_header = {"format": kind, "version": version, **header}
+    header_bytes = np.frombuffer(json.dumps(full_header).encode("utf-8"), dtype=np.uint8)
+    payload = {_HEADER_KEY: header_bytes, **{k: np.asarray(v) for k, v in arrays.items()}}
+    return write_atomic(path, lambda handle: np.savez_compressed(handle, **payload))
+
+
+def load_arrays(
+    path: str | os.PathLike[str], kind: str, version: int
+) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
+    """Load a file written by ``save_arrays``; any defect is a one-line ``FileFormatError``."""
+    source = Path(path)
+    if not source.is_file():
+        raise FileFormatError(f"{source}: no such file; check the path")
+    try:
+        with np.load(source, allow_pickle=False) as archive:
+            arrays = {name: archive[name] for name in archive.files}
+    except (OSError, ValueError, zipfile.BadZipFile, EOFError) as exc:
+        raise FileFormatError(
+            f"{source}: not a readable {kind} file ({exc.__class__.__name__}: {exc}); "
+            "re-create it"
+        ) from exc
+    raw_header = arrays.pop(_HEADER_KEY, None)
+    if raw_header is None:
+        raise FileFormatError(f"{source}: has no header, so it is not a {kind} file; re-create it")
+    try:
+        header = json.loads(raw_header.tobytes().decode("utf-8"))
+    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise FileFormatError(f"{source}: its header is corrupt ({exc}); re-create it") from exc
+    if not isinstance(header, dict) or header.get("format") != kind:
+        found = header.get("format") if isinstance(header, dict) else None
+        raise FileFormatError(f"{source}: is a {found!r} file, not a {kind!r} file")
+    if header.get("version") != version:
+        raise FileFormatError(
+            f"{source}: {kind} format version {header.get('version')!r} is not supported "
+            f"(this version of twin reads version {version}); re-create the file"
+        )
+    return header, arrays
