@@ -84,17 +84,22 @@ class CameraModel:
         """Pixel column that sees ``bearing`` (radians relative to the optical axis)."""
         return self.width / 2.0 - self.focal_px * np.tan(np.asarray(bearing, dtype=float))
 
-    def wedges(self, pose: Pose2D, pan: float, column_edges: np.ndarray) -> np.ndarray:
-        """Bearing intervals in the map frame of the patch columns bounded by ``column_edges``.
+    def wedges(self, pose: Pose2D, pan: float, column_spans: np.ndarray) -> np.ndarray:
+        """Bearing intervals in the map frame of patch columns spanning the given pixels.
 
-        ``column_edges`` holds n+1 increasing pixel positions; the result is an (n, 2) array of
-        [a0, a1] with a0 < a1, in radians, for a camera at ``pose`` panned by ``pan`` (left
-        positive). Column 0 (leftmost) gets the largest bearings.
+        ``column_spans`` is an (n, 2) array of [u0, u1] pixel ranges, u0 < u1 (columns may
+        overlap, as patches with a stride smaller than their width do). The result is an (n, 2)
+        array of [a0, a1] with a0 < a1, radians, for a camera at ``pose`` panned by ``pan``
+        (left positive): the left pixel edge u0 gives the larger bearing a1.
         """
-        edges = np.asarray(column_edges, dtype=float)
-        if edges.ndim != 1 or edges.size < 2 or np.any(np.diff(edges) <= 0):
-            raise InputError("column_edges must be at least two increasing pixel positions")
+        spans = np.asarray(column_spans, dtype=float)
+        if spans.ndim != 2 or spans.shape[1] != 2 or spans.shape[0] == 0:
+            raise InputError(f"column_spans must be an (n, 2) array, got shape {spans.shape}")
+        if not np.all(np.isfinite(spans)) or np.any(spans[:, 1] <= spans[:, 0]):
+            raise InputError("column_spans must be finite pixel ranges [u0, u1] with u0 < u1")
         require_finite("pan", pan)
         axis = pose.yaw + pan
-        bearings = axis + self.column_bearing(edges)
-        return np.stack([bearings[1:], bearings[:-1]], axis=1)
+        return np.stack(
+            [axis + self.column_bearing(spans[:, 1]), axis + self.column_bearing(spans[:, 0])],
+            axis=1,
+        )
