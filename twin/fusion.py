@@ -1,0 +1,142 @@
+"""Fusion rules: how one view's column values change a grid layer, and how a layer is read.
+
+Every rule keeps the same two sums per cell, so that all rules are driven by one coverage pass:
+
+* ``evidence`` = initial prior + sum over views and columns of weight(column) x coverage;
+* ``observed`` = sum over views and columns of coverage (how much the cell has been seen).
+
+A rule only chooses the per-column weight and how the two sums are read as a confidence map:
+
+* ``accumulate`` (the paper, Section 1.3): weight = the column's match value; read = evidence.
+* ``normalized``: the paper's sum divided by how much the cell was observed, i.e. the mean match
+  of the views that saw the cell. Cells seen less than ``min_observed`` (in units of full-cell
+  coverage) read 0, because one glancing view would otherwise make a cell certain.
+* ``logodds``: a binary detector model with false-positive rate P_fp and false-negative rate
+  P_fn. A column fires when its value reaches ``threshold``; a fired column adds
+  log((1 - P_fn) / P_fp) to its cells, a silent one log(P_fn / (1 - P_fp)) (negative evidence).
+  Rates are clamped to [``RATE_EPS``, 1 - ``RATE_EPS``] so the weights stay finite.
+
+The paper's rule is the reference; the others are measured against it (``twin montecarlo``).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass
+from typing import Any, ClassVar, Protocol
+
+import numpy as np
+
+from twin.errors import InputError
+
+RATE_EPS = 1e-3
+
+
+class FusionRule(Protocol):
+    """What the grid needs from a rule."""
+
+    name: ClassVar[str]
+
+    def column_weights(self, values: np.ndarray) -> np.ndarray:
+        """Per-column increment per unit of coverage, for column values in [0, 1]."""
+        ...
+
+    def read(self, evidence: np.ndarray, observed: np.ndarray) -> np.ndarray:
+        """The confidence map of a layer from its two sums."""
+        ...
+
+    def params(self) -> dict[str, Any]:
+        """The rule's parameters (for headers and results), JSON-serializable."""
+        ...
+
+
+@dataclass(frozen=True)
+class Accumulate:
+    """The paper's rule: every covered cell gains the column's value times its coverage."""
+
+    name: ClassVar[str] = "accumulate"
+
+    def column_weights(self, values: np.ndarray) -> np.ndarray:
+        return np.asarray(values, dtype=float)
+
+    def read(self, evidence: np.ndarray, observed: np.ndarray) -> np.ndarray:
+        return evidence
+
+    def params(self) -> dict[str, Any]:
+        return {}
+
+
+@dataclass(frozen=True)
+class Normalized:
+    """The paper's sum divided by how much each cell has been observed."""
+
+    name: ClassVar[str] = "normalized"
+    min_observed: float = 1.0
+
+    def __post_init__(self) -> None:
+        if not (math.isfinite(self.min_observed) and self.min_observed >= 0.0):
+            raise InputError(f"min_observed must be >= 0, got {self.min_observed!r}")
+
+    def column_weights(self, values: np.ndarray) -> np.ndarray:
+        return np.asarray(values, dtype=float)
+
+    def read(self, evidence: np.ndarray, observed: np.ndarray) -> np.ndarray:
+        seen = (observed > 0.0) & (observed >= self.min_observed)
+        return np.divide(evidence, observed, out=np.zeros_like(evidence), where=seen)
+
+    def params(self) -> dict[str, Any]:
+        return asdict(self)
+
+
+@dataclass(frozen=True)
+class LogOdds:
+    """Binary detector model: fired columns add positive, silent ones negative log-odds."""
+
+    name: ClassVar[str] = "logodds"
+    p_fp: float = 0.1
+    p_fn: float = 0.3
+    threshold: float = 0.5
+
+    def __post_init__(self) -> None:
+        for key in ("p_fp", "p_fn", "threshold"):
+            value = getattr(self, key)
+            if not (math.isfinite(value) and 0.0 <= value <= 1.0):
+                raise InputError(f"logodds {key} must be in [0, 1], got {value!r}")
+
+    @property
+    def fired_weight(self) -> float:
+        return logodds_weights(self.p_fp, self.p_fn)[0]
+
+    @property
+    def silent_weight(self) -> float:
+        return logodds_weights(self.p_fp, self.p_fn)[1]
+
+    def column_weights(self, values: np.ndarray) -> np.ndarray:
+        fired = np.asarray(values, dtype=float) >= self.threshold
+        return np.where(fired, self.fired_weight, self.silent_weight)
+
+    def read(self, evidence: np.ndarray, observed: np.ndarray) -> np.ndarray:
+        return evidence
+
+    def params(self) -> dict[str, Any]:
+        return asdict(self)
+
+
+def logodds_weights(p_fp: float, p_fn: float) -> tuple[float, float]:
+    """(fired, silent) log-odds increments of a detector with rates clamped away from 0 and 1."""
+    p_fp = min(max(p_fp, RATE_EPS), 1.0 - RATE_EPS)
+    p_fn = min(max(p_fn, RATE_EPS), 1.0 - RATE_EPS)
+    return math.log((1.0 - p_fn) / p_fp), math.log(p_fn / (1.0 - p_fp))
+
+
+RULES: dict[str, type] = {rule.name: rule for rule in (Accumulate, Normalized, LogOdds)}
+
+
+def make_rule(name: str, **params: Any) -> FusionRule:
+    """Build a rule by name; unknown names or parameters are one-line ``InputError``s."""
+    if name not in RULES:
+        raise InputError(f"unknown fusion rule {name!r}; choose one of {', '.join(RULES)}")
+    try:
+        return RULES[name](**params)
+    except TypeError as exc:
+        raise InputError(f"bad parameters for fusion rule {name!r}: {exc}") from exc
