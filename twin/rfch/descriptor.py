@@ -1,0 +1,105 @@
+"""Input checks and the per-pixel RFCH descriptor ("receptive field responses").
+
+The raw descriptor of a pixel is [r, g, responses…]: normalized colour r = R/(R+G+B),
+g = G/(R+G+B), then for each Gaussian scale σ the rotation-invariant responses of the intensity
+image (gradient magnitude |∇L_σ| and/or Laplacian L_σ,xx + L_σ,yy). It is computed once per
+frame and shared by every object; each model's z-scoring is an affine map applied while labelling.
+"""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+
+from twin.errors import InputError
+from twin.rfch.params import RFCHParams
+
+
+def check_image(image: object, what: str = "image") -> np.ndarray:
+    """Return ``image`` as an H×W×3 uint8 RGB array or raise a one-line ``InputError``.
+
+    A constant frame is refused: it carries no colour or structure, so any score on it would be
+    meaningless (a covered lens or a dead camera), and a silent zero would hide that.
+    """
+    if not isinstance(image, np.ndarray):
+        raise InputError(f"{what} must be a numpy array, got {type(image).__name__}")
+    if image.dtype.kind in "fc" and not np.all(np.isfinite(image)):
+        raise InputError(f"{what} contains NaN or infinite values; pass a finite uint8 RGB frame")
+    if image.ndim != 3 or image.shape[2] != 3:
+        raise InputError(f"{what} must be H×W×3 RGB, got shape {image.shape}")
+    if image.dtype != np.uint8:
+        raise InputError(
+            f"{what} must be uint8 (0…255), got dtype {image.dtype}; convert it with "
+            "np.clip(x, 0, 255).astype(np.uint8) if it holds 0…255 values"
+        )
+    if image.shape[0] < 2 or image.shape[1] < 2:
+        raise InputError(f"{what} is too small ({image.shape[0]}×{image.shape[1]} px)")
+    flat = image.reshape(-1, 3)
+    if np.all(flat == flat[0]):
+        raise InputError(
+            f"{what} is constant (every pixel is RGB {tuple(int(v) for v in flat[0])}); "
+            "check the camera or the file"
+        )
+    return image
+
+
+def check_mask(mask: object, shape: tuple[int, ...], what: str = "mask") -> np.ndarray:
+    """Return ``mask`` as an H×W bool array matching ``shape`` or raise an ``InputError``."""
+    if not isinstance(mask, np.ndarray):
+        raise InputError(f"{what} must be a numpy bool array, got {type(mask).__name__}")
+    if mask.dtype != np.bool_:
+        raise InputError(f"{what} must be dtype bool, got {mask.dtype}; pass (mask != 0)")
+    if mask.shape != tuple(shape[:2]):
+        raise InputError(
+            f"{what} has shape {mask.shape} but its image is {shape[0]}×{shape[1]}; "
+            "masks must match their images pixel for pixel"
+        )
+    if not mask.any():
+        raise InputError(f"{what} is empty (no object pixel); mark the object with True")
+    return mask
+
+
+def raw_descriptors(image: np.ndarray, params: RFCHParams) -> np.ndarray:
+    """H×W×D float32 raw descriptor of a checked frame (see the module docstring for the order).
+
+    Derivatives are central differences of the Gaussian-smoothed image, which equal Gaussian-
+    derivative filtering to within the blur's own width at σ ≥ 1 and cost a fraction of it.
+    """
+    rgb = image.astype(np.float32)
+    total = rgb.sum(axis=2)
+    dark = total <= 0.0
+    # Black pixels have no chromaticity; give them the neutral grey point instead of 0/0.
+    safe_total = np.where(dark, 1.0, total)
+    channels = [
+        np.where(dark, 1.0 / 3.0, rgb[..., 0] / safe_total),
+        np.where(dark, 1.0 / 3.0, rgb[..., 1] / safe_total),
+    ]
+    if params.responses:
+        intensity = total / 3.0
+        if params.log_intensity:
+            intensity = np.log(intensity + np.float32(params.intensity_offset))
+        else:
+            intensity = intensity / np.float32(255.0)
+        for sigma in params.sigmas:
+            smooth = cv2.GaussianBlur(intensity, (0, 0), sigma, borderType=cv2.BORDER_REFLECT)
+            if "gradient" in params.responses:
+                gx = cv2.Sobel(smooth, cv2.CV_32F, 1, 0, ksize=1, scale=0.5)
+                gy = cv2.Sobel(smooth, cv2.CV_32F, 0, 1, ksize=1, scale=0.5)
+                # σ-normalised so that scales are comparable before z-scoring.
+                channels.append(cv2.magnitude(gx, gy) * np.float32(sigma))
+            if "laplacian" in params.responses:
+                lap = cv2.Laplacian(smooth, cv2.CV_32F, ksize=1)
+                channels.append(lap * np.float32(sigma * sigma))
+    return np.ascontiguousarray(np.stack(channels, axis=2), dtype=np.float32)
+
+
+def sample(array: np.ndarray, step: int) -> np.ndarray:
+    """Every ``step``-th pixel in each direction, starting at pixel (0, 0), contiguous."""
+    return np.ascontiguousarray(array[::step, ::step])
+
+
+def sample_bounds(starts: np.ndarray, size: int, step: int) -> np.ndarray:
+    """(n, 2) half-open sample-index ranges of pixel ranges [s, s + size) on a step grid."""
+    lo = -(-starts // step)
+    hi = -(-(starts + size) // step)
+    return np.stack([lo, hi], axis=1).astype(np.int64)

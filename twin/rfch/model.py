@@ -1,0 +1,275 @@
+"""One object's RFCH model: training from masked images, model files, per-patch scores."""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import cv2
+import numpy as np
+
+from twin.errors import FileFormatError, InputError, TwinError
+from twin.rfch import kernels
+from twin.rfch.descriptor import check_image, check_mask, raw_descriptors, sample
+from twin.rfch.params import RFCHParams
+from twin.store import load_arrays, save_arrays
+
+MODEL_KIND = "rfch-model"
+MODEL_VERSION = 1
+# Standard deviations below this (in descriptor units: chromaticity, or log/relative intensity
+# per px) are floored so that a flat-coloured training object does not blow up the z-scores.
+_MIN_STD = 0.01
+
+
+@dataclass
+class RFCH:
+    """A trained RFCH model of one object.
+
+    ``offset`` and ``scale`` map the raw descriptor to the k-means space: z = (x - offset) ·
+    scale (training mean, and colour weight / training std). ``centres`` (K×D) live in that
+    space, ``radius`` (K) is α × each cluster's mean training distance (floored), and
+    ``histograms`` (V×K×K) are normalized upper-triangular pair histograms: one per training
+    view (``params.views == "per_view"``) or a single merged one.
+    """
+
+    name: str
+    params: RFCHParams
+    offset: np.ndarray
+    scale: np.ndarray
+    centres: np.ndarray
+    radius: np.ndarray
+    histograms: np.ndarray
+    summary: dict[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        if not self.name or not isinstance(self.name, str):
+            raise InputError(f"model name must be a non-empty string, got {self.name!r}")
+        dims = self.params.n_dims
+        k = self.centres.shape[0] if self.centres.ndim == 2 else -1
+        expected = {
+            "offset": (self.offset, (dims,)),
+            "scale": (self.scale, (dims,)),
+            "centres": (self.centres, (k, dims)),
+            "radius": (self.radius, (k,)),
+        }
+        for what, (array, shape) in expected.items():
+            if array.shape != shape or not np.all(np.isfinite(array)):
+                raise InputError(f"model {what} must be finite with shape {shape}, got {array.shape}")
+        hist = self.histograms
+        if hist.ndim != 3 or hist.shape[1:] != (k, k) or hist.shape[0] < 1:
+            raise InputError(f"model histograms must be (views, {k}, {k}), got {hist.shape}")
+        if not np.all(np.isfinite(hist)) or np.any(hist < 0):
+            raise InputError("model histograms must be finite and non-negative")
+        self.offset = self.offset.astype(np.float32)
+        self.scale = self.scale.astype(np.float32)
+        self.centres = np.ascontiguousarray(self.centres, dtype=np.float32)
+        self.radius = self.radius.astype(np.float32)
+        self.histograms = np.ascontiguousarray(hist, dtype=np.float32)
+        self._colour_table = kernels.colour_table(
+            self.offset, self.scale, self.centres, self.radius
+        )
+
+    # ---------------------------------------------------------------- training
+    @classmethod
+    def train(
+        cls,
+        name: str,
+        images: Sequence[np.ndarray],
+        masks: Sequence[np.ndarray],
+        **params: Any,
+    ) -> RFCH:
+        """Train on one or more views (H×W×3 uint8 images, H×W bool masks of the object).
+
+        Keyword arguments are ``RFCHParams`` fields. Steps (spec §2): descriptors of the mask
+        pixels, z-scoring with their statistics (colour weighted), seeded k-means, per-cluster
+        mean distance, then the pair histogram of the masked training pixels built exactly as
+        for a test patch (same labelling with rejection, same d_max and sample step).
+        """
+        config = RFCHParams.from_json(params)
+        images = list(images)
+        masks = list(masks)
+        if not images:
+            raise InputError("training needs at least one image with its mask")
+        if len(images) != len(masks):
+            raise InputError(f"got {len(images)} training images but {len(masks)} masks")
+        checked = []
+        for index, (image, mask) in enumerate(zip(images, masks, strict=True)):
+            image = check_image(image, f"training image {index}")
+            mask = check_mask(mask, image.shape, f"training mask {index}")
+            checked.append((raw_descriptors(image, config), mask))
+        rng = np.random.default_rng(config.seed)
+
+        pixels = np.concatenate([desc[mask] for desc, mask in checked])
+        mean = pixels.mean(axis=0, dtype=np.float64)
+        std = np.maximum(pixels.std(axis=0, dtype=np.float64), _MIN_STD)
+        scale = 1.0 / std
+        scale[:2] *= config.colour_weight
+        if len(pixels) > config.max_training_pixels:
+            pick = rng.choice(len(pixels), config.max_training_pixels, replace=False)
+            pixels = pixels[np.sort(pick)]
+        points = ((pixels - mean) * scale).astype(np.float32)
+        centres = _kmeans(points, config.n_clusters, config.kmeans_iterations, rng)
+
+        labels = nearest_centres(points, centres)
+        distances = np.linalg.norm(points - centres[labels], axis=1)
+        members = np.bincount(labels, minlength=len(centres))
+        keep = members > 0  # k-means may leave a centre without members; it would match nothing
+        mean_distance = np.bincount(labels, weights=distances, minlength=len(centres))[keep]
+        mean_distance /= members[keep]
+        centres = centres[keep]
+        radius = config.alpha * np.maximum(mean_distance, config.min_cluster_radius)
+
+        widths = kernels.half_widths(config.d_max, config.sample_step)
+        per_view = []
+        for index, (desc, mask) in enumerate(checked):
+            view_labels = kernels.label_samples(
+                sample(desc, config.sample_step),
+                mean.astype(np.float32),
+                scale.astype(np.float32),
+                centres,
+                (radius**2).astype(np.float32),
+                True,
+                kernels.colour_table(mean, scale, centres, radius),
+            )
+            view_labels[~sample(mask, config.sample_step)] = -1
+            counts = kernels.pair_counts(
+                view_labels, widths, len(centres), 0, view_labels.shape[0], 0,
+                view_labels.shape[1],
+            )
+            if counts.sum() == 0:
+                raise InputError(
+                    f"training mask {index} yields no pixel pair within d_max={config.d_max} px "
+                    "after rejection; give a larger object region or lower sample_step"
+                )
+            per_view.append(counts.astype(np.float64))
+        if config.views == "merged":
+            merged = np.sum(per_view, axis=0)
+            histograms = (merged / merged.sum())[None]
+        else:
+            histograms = np.stack([c / c.sum() for c in per_view])
+        summary = {
+            "views": len(checked),
+            "object_pixels": int(sum(int(m.sum()) for _, m in checked)),
+            "kmeans_pixels": len(points),
+            "clusters": len(centres),
+            "mean_cluster_distance": float(mean_distance.mean()),
+            "pairs_per_view": [int(c.sum()) for c in per_view],
+        }
+        return cls(name, config, mean, scale, centres, radius, histograms, summary)
+
+    # ---------------------------------------------------------------- files
+    def save(self, path: str | os.PathLike[str]) -> None:
+        """Write the model atomically as ``.npz`` + JSON header (kind ``rfch-model``, v1)."""
+        header = {"name": self.name, "params": self.params.to_json(), "summary": self.summary}
+        save_arrays(
+            path,
+            MODEL_KIND,
+            MODEL_VERSION,
+            header,
+            {
+                "offset": self.offset,
+                "scale": self.scale,
+                "centres": self.centres,
+                "radius": self.radius,
+                "histograms": self.histograms,
+            },
+        )
+
+    @classmethod
+    def load(cls, path: str | os.PathLike[str]) -> RFCH:
+        """Read a model file; a corrupt or mismatched file is a one-line ``FileFormatError``."""
+        header, arrays = load_arrays(path, MODEL_KIND, MODEL_VERSION)
+        try:
+            params = RFCHParams.from_json(header["params"])
+            return cls(
+                name=header["name"],
+                params=params,
+                offset=arrays["offset"],
+                scale=arrays["scale"],
+                centres=arrays["centres"],
+                radius=arrays["radius"],
+                histograms=arrays["histograms"],
+                summary=dict(header.get("summary", {})),
+            )
+        except (KeyError, TypeError, AttributeError, TwinError) as exc:
+            raise FileFormatError(f"{path}: inconsistent rfch-model file ({exc}); re-train it") from exc
+
+    # ---------------------------------------------------------------- scoring
+    @property
+    def n_clusters(self) -> int:
+        return int(self.centres.shape[0])
+
+    def flat_histograms(self) -> np.ndarray:
+        """(V, K·K) float32 histograms as the compiled patch kernel wants them."""
+        return self.histograms.reshape(self.histograms.shape[0], -1)
+
+    def label(self, descriptors: np.ndarray) -> np.ndarray:
+        """Labels (-1 = background) of sampled raw descriptors (h×w×D)."""
+        return kernels.label_samples(
+            descriptors,
+            self.offset,
+            self.scale,
+            self.centres,
+            self.radius**2,
+            True,
+            self._colour_table,
+        )
+
+    def scores(self, image: np.ndarray) -> np.ndarray:
+        """Degree of match in [0, 1] of every patch: (rows, cols) float32."""
+        from twin.rfch.detector import Detector
+
+        return Detector([self]).scores(image)[0]
+
+    def patch_boxes(self, shape: tuple[int, ...]) -> np.ndarray:
+        """(rows, cols, 4) patch boxes [x0, y0, x1, y1] in px for a frame of ``shape``."""
+        return self.params.grid.boxes(shape)
+
+    def column_spans(self, width: int) -> np.ndarray:
+        """(cols, 2) pixel spans [u0, u1] of the patch columns, for ``CameraModel.wedges``."""
+        return self.params.grid.column_spans(width)
+
+
+def _kmeans(
+    points: np.ndarray, n_clusters: int, iterations: int, rng: np.random.Generator
+) -> np.ndarray:
+    """Seeded k-means: k-means++ seeding from ``rng``, then OpenCV's Lloyd iterations.
+
+    Seeding here (not in OpenCV) keeps all randomness in the numpy Generator, so a seed gives
+    the same centres on every machine. Fewer distinct points than clusters lowers the count.
+    """
+    distinct = np.unique(points, axis=0)
+    k = min(n_clusters, len(distinct))
+    if k < 2:
+        raise InputError(
+            "the training pixels have fewer than 2 distinct descriptors; the object region "
+            "must show some colour or texture"
+        )
+    seeds = [distinct[rng.integers(len(distinct))]]
+    nearest = np.sum((distinct - seeds[0]) ** 2, axis=1)
+    for _ in range(1, k):
+        choice = rng.choice(len(distinct), p=nearest / nearest.sum())
+        seeds.append(distinct[choice])
+        nearest = np.minimum(nearest, np.sum((distinct - distinct[choice]) ** 2, axis=1))
+    initial = nearest_centres(points, np.array(seeds, dtype=np.float32))[:, None]
+    criteria = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER, iterations, 1e-4)
+    _, _, centres = cv2.kmeans(
+        points, k, initial, criteria, 1, cv2.KMEANS_USE_INITIAL_LABELS
+    )
+    return np.ascontiguousarray(centres, dtype=np.float32)
+
+
+def nearest_centres(points: np.ndarray, centres: np.ndarray) -> np.ndarray:
+    """(n,) int32 index of the nearest centre of each point (both already in k-means space)."""
+    dims = points.shape[1]
+    return kernels.label_samples(
+        np.ascontiguousarray(points[:, None, :], dtype=np.float32),
+        np.zeros(dims, np.float32),
+        np.ones(dims, np.float32),
+        np.ascontiguousarray(centres, dtype=np.float32),
+        np.zeros(len(centres), np.float32),
+        False,
+        np.ones((1, 1), dtype=bool),
+    )[:, 0]
