@@ -1,0 +1,59 @@
+"""Wall time and peak memory of the full default Monte Carlo sweep (the paper's Figure 3).
+
+    python benchmarks/bench_montecarlo.py [--workers N] [--trials T]
+
+121 settings (P_fp, P_fn in 0, 0.1, ..., 1) x 100 trials x up to 150 views, all three fusion
+rules, as ``twin montecarlo`` runs it, into a temporary folder (no resume). Also prints the cost
+of one trial, so the per-view cost can be read off.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import resource
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+from twin.cli import main as twin_main
+from twin.montecarlo import SweepConfig, run_trial
+
+
+def peak_rss_mib(who: int) -> float:
+    return resource.getrusage(who).ru_maxrss / 1024.0
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--workers", type=int, default=os.cpu_count() or 1)
+    parser.add_argument("--trials", type=int, default=100)
+    args = parser.parse_args()
+
+    config = SweepConfig()
+    run_trial(config, 0.1, 0.1, 0)  # load or compile the kernel outside the timing
+    start = time.perf_counter()
+    n = 200
+    for trial in range(n):
+        run_trial(config, 0.3, 0.3, trial)
+    per_trial = (time.perf_counter() - start) / n
+    print(f"one trial of 150 views, 3 rules: {1e3 * per_trial:.2f} ms "
+          f"({1e6 * per_trial / 150:.1f} us per view)")  # fmt: skip
+
+    with tempfile.TemporaryDirectory() as folder:
+        argv = ["montecarlo", "--trials", str(args.trials), "--workers", str(args.workers),
+                "--out", str(Path(folder) / "mc"), "--quiet"]  # fmt: skip
+        start = time.perf_counter()
+        code = twin_main(argv)
+        wall = time.perf_counter() - start
+    if code:
+        sys.exit(code)
+    print(f"full default sweep (121 settings x {args.trials} trials, 150 views, 3 rules), "
+          f"{args.workers} worker(s): {wall:.1f} s wall")  # fmt: skip
+    print(f"peak memory: this process {peak_rss_mib(resource.RUSAGE_SELF):.0f} MiB, "
+          f"largest worker {peak_rss_mib(resource.RUSAGE_CHILDREN):.0f} MiB")  # fmt: skip
+
+
+if __name__ == "__main__":
+    main()
