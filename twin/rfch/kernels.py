@@ -33,8 +33,10 @@ def half_widths(d_max: float, step: int) -> np.ndarray:
     """
     reach = int(d_max // step)
     return np.array(
-        [int(np.floor(np.sqrt(max(d_max**2 - (dy * step) ** 2, 0.0)) / step + 1e-9))
-         for dy in range(reach + 1)],
+        [
+            int(np.floor(np.sqrt(max(d_max**2 - (dy * step) ** 2, 0.0)) / step + 1e-9))
+            for dy in range(reach + 1)
+        ],
         dtype=np.int64,
     )
 
@@ -131,10 +133,7 @@ def _count_patch(labels, widths, y0, y1, x0, x1, n_labels, scratch, touched):
                     b = labels[yy, xx]
                     if b < 0:
                         continue
-                    if a <= b:
-                        index = a * n_labels + b
-                    else:
-                        index = b * n_labels + a
+                    index = a * n_labels + b if a <= b else b * n_labels + a
                     if scratch[index] == 0:
                         touched[n_touched] = index
                         n_touched += 1
@@ -171,8 +170,15 @@ def patch_scores(
     for r in range(row_bounds.shape[0]):
         for c in range(col_bounds.shape[0]):
             total, n_touched = _count_patch(
-                labels, widths, row_bounds[r, 0], row_bounds[r, 1], col_bounds[c, 0],
-                col_bounds[c, 1], n_labels, scratch, touched,
+                labels,
+                widths,
+                row_bounds[r, 0],
+                row_bounds[r, 1],
+                col_bounds[c, 0],
+                col_bounds[c, 1],
+                n_labels,
+                scratch,
+                touched,
             )
             if total > 0:
                 inverse = 1.0 / total

@@ -56,7 +56,9 @@ class RFCH:
         }
         for what, (array, shape) in expected.items():
             if array.shape != shape or not np.all(np.isfinite(array)):
-                raise InputError(f"model {what} must be finite with shape {shape}, got {array.shape}")
+                raise InputError(
+                    f"model {what} must be finite with shape {shape}, got {array.shape}"
+                )
         hist = self.histograms
         if hist.ndim != 3 or hist.shape[1:] != (k, k) or hist.shape[0] < 1:
             raise InputError(f"model histograms must be (views, {k}, {k}), got {hist.shape}")
@@ -135,7 +137,12 @@ class RFCH:
             )
             view_labels[~sample(mask, config.sample_step)] = -1
             counts = kernels.pair_counts(
-                view_labels, widths, len(centres), 0, view_labels.shape[0], 0,
+                view_labels,
+                widths,
+                len(centres),
+                0,
+                view_labels.shape[0],
+                0,
                 view_labels.shape[1],
             )
             if counts.sum() == 0:
@@ -194,7 +201,9 @@ class RFCH:
                 summary=dict(header.get("summary", {})),
             )
         except (KeyError, TypeError, AttributeError, TwinError) as exc:
-            raise FileFormatError(f"{path}: inconsistent rfch-model file ({exc}); re-train it") from exc
+            raise FileFormatError(
+                f"{path}: inconsistent rfch-model file ({exc}); re-train it"
+            ) from exc
 
     # ---------------------------------------------------------------- scoring
     @property
@@ -255,9 +264,7 @@ def _kmeans(
         nearest = np.minimum(nearest, np.sum((distinct - distinct[choice]) ** 2, axis=1))
     initial = nearest_centres(points, np.array(seeds, dtype=np.float32))[:, None]
     criteria = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER, iterations, 1e-4)
-    _, _, centres = cv2.kmeans(
-        points, k, initial, criteria, 1, cv2.KMEANS_USE_INITIAL_LABELS
-    )
+    _, _, centres = cv2.kmeans(points, k, initial, criteria, 1, cv2.KMEANS_USE_INITIAL_LABELS)
     return np.ascontiguousarray(centres, dtype=np.float32)
 
 

@@ -1,0 +1,349 @@
+"""RFCH: known answers on hand-made label images, invariance, files, Detector, bad input."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from twin.errors import FileFormatError, InputError
+from twin.geometry import CameraModel, Pose2D
+from twin.rfch import RFCH, Detector, PatchGrid, RFCHParams, kernels
+from twin.rfch.reference import intersection, reference_pair_counts
+from twin.rfch.roc import column_truth, roc_curve
+from twin.rfch.synthetic import cloudy_background, paste, striped_object
+from twin.store import save_arrays
+
+SMALL = {"n_clusters": 16}
+
+
+def scene(seed: int, centre=(90, 40), **pose) -> tuple[np.ndarray, np.ndarray]:
+    rng = np.random.default_rng(seed)
+    obj, mask = striped_object(40)
+    return paste(cloudy_background(rng, 96, 128), obj, mask, centre, **pose)
+
+
+@pytest.fixture(scope="module")
+def model() -> RFCH:
+    frame, mask = scene(0, centre=(60, 50))
+    return RFCH.train("rings", [frame], [mask], **SMALL)
+
+
+def box_containing(model: RFCH, shape, xy) -> set[tuple[int, int]]:
+    """Patches whose box holds the pixel ``xy``."""
+    boxes = model.patch_boxes(shape)
+    x, y = xy
+    inside = (boxes[..., 0] <= x) & (x < boxes[..., 2]) & (boxes[..., 1] <= y) & (y < boxes[..., 3])
+    return {tuple(int(v) for v in rc) for rc in np.argwhere(inside)}
+
+
+# ------------------------------------------------------------------ known answers
+
+
+@pytest.mark.parametrize("count", [kernels.pair_counts, "reference"])
+def test_pair_counts_on_a_tiny_label_image(count) -> None:
+    labels = np.array([[0, 1, 0], [-1, 2, 1]], dtype=np.int32)
+
+    def counts(d_max: float) -> np.ndarray:
+        if count == "reference":
+            return reference_pair_counts(labels, 3, 1, d_max, (0, 2, 0, 3))
+        return count(labels, kernels.half_widths(d_max, 1), 3, 0, 2, 0, 3)
+
+    # d_max = 1: horizontal and vertical neighbours only; the background pixel joins no pair.
+    expected = np.zeros((3, 3), dtype=np.int64)
+    expected[0, 1] = 2  # (0,0)-(0,1) and (0,1)-(0,2)
+    expected[1, 2] = 2  # (0,1)-(1,1) and (1,1)-(1,2)
+    expected[0, 1] += 1  # (0,2)-(1,2)
+    np.testing.assert_array_equal(counts(1.0), expected)
+    # d_max = 1.5 adds the diagonals: (0,0)-(1,1) 0-2, (0,2)-(1,1) 0-2, (0,1)-(1,2) 1-1.
+    expected[0, 2] += 2
+    expected[1, 1] += 1
+    np.testing.assert_array_equal(counts(1.5), expected)
+    # d_max = 2 adds the two pixels two apart: (0,0)-(0,2) 0-0; (1,0) is background.
+    expected[0, 0] += 1
+    np.testing.assert_array_equal(counts(2.0), expected)
+
+
+def test_pair_counts_use_true_pixel_distance_with_a_sample_step() -> None:
+    labels = np.zeros((1, 4), dtype=np.int32)  # samples at pixels 0, 2, 4, 6
+    widths = kernels.half_widths(3.0, 2)
+    assert kernels.pair_counts(labels, widths, 1, 0, 1, 0, 4)[0, 0] == 3  # only neighbours
+    widths = kernels.half_widths(4.0, 2)
+    assert kernels.pair_counts(labels, widths, 1, 0, 1, 0, 4)[0, 0] == 5  # 2 and 4 px apart
+
+
+def test_pairs_straddling_the_patch_border_are_not_counted() -> None:
+    labels = np.zeros((1, 4), dtype=np.int32)
+    widths = kernels.half_widths(1.0, 1)
+    assert kernels.pair_counts(labels, widths, 1, 0, 1, 0, 2)[0, 0] == 1
+    assert kernels.pair_counts(labels, widths, 1, 0, 1, 1, 4)[0, 0] == 2
+
+
+def test_intersection_of_identical_histograms_is_one_and_of_disjoint_ones_zero() -> None:
+    rng = np.random.default_rng(3)
+    labels = rng.integers(0, 2, size=(8, 8)).astype(np.int32)  # labels 0 and 1 only
+    widths = kernels.half_widths(2.0, 1)
+    counts = kernels.pair_counts(labels, widths, 4, 0, 8, 0, 8).astype(np.float64)
+    model = (counts / counts.sum()).astype(np.float32).reshape(1, -1)
+    whole = np.array([[0, 8]])
+    same = kernels.patch_scores(labels, widths, whole, whole, model)
+    assert same[0, 0] == pytest.approx(1.0, abs=1e-6)
+    assert intersection(model.reshape(4, 4), counts) == pytest.approx(1.0, abs=1e-6)
+    other = (labels + 2).astype(np.int32)  # labels 2 and 3: no bin in common
+    assert kernels.patch_scores(other, widths, whole, whole, model)[0, 0] == 0.0
+    empty = np.full((8, 8), -1, dtype=np.int32)
+    assert kernels.patch_scores(empty, widths, whole, whole, model)[0, 0] == 0.0
+
+
+def test_colour_table_never_rejects_an_accepted_pixel(model: RFCH) -> None:
+    frame, _ = scene(5)
+    desc = model.params  # labelling with and without the colour shortcut must agree
+    from twin.rfch.descriptor import raw_descriptors, sample
+
+    sampled = sample(raw_descriptors(frame, desc), model.params.sample_step)
+    everything = np.ones((1, 1), dtype=bool)
+    full = kernels.label_samples(
+        sampled, model.offset, model.scale, model.centres, model.radius**2, True, everything
+    )
+    np.testing.assert_array_equal(model.label(sampled), full)
+    assert (full >= 0).any() and (full < 0).any()
+
+
+# ------------------------------------------------------------------ detection
+
+
+def test_the_object_patch_scores_highest(model: RFCH) -> None:
+    frame, _ = scene(1, centre=(90, 40))
+    scores = model.scores(frame)
+    assert scores.shape == model.params.grid.shape(frame.shape)
+    assert scores.dtype == np.float32 and scores.min() >= 0.0 and scores.max() <= 1.0
+    best = np.unravel_index(np.argmax(scores), scores.shape)
+    assert tuple(int(v) for v in best) in box_containing(model, frame.shape, (90, 40))
+    assert scores.max() > 2.0 * np.median(scores)
+
+
+@pytest.mark.parametrize(
+    "pose", [{"gain": 0.7}, {"gain": 1.2}, {"angle_deg": 90.0}, {"scale": 0.8}, {"scale": 1.2}]
+)
+def test_right_patch_still_scores_highest_under_pose_and_lighting(model: RFCH, pose) -> None:
+    frame, _ = scene(2, centre=(40, 56), **pose)
+    scores = model.scores(frame)
+    best = tuple(int(v) for v in np.unravel_index(np.argmax(scores), scores.shape))
+    assert best in box_containing(model, frame.shape, (40, 56))
+
+
+def test_rotating_or_darkening_the_whole_frame_keeps_the_best_patch(model: RFCH) -> None:
+    frame, _ = scene(2, centre=(40, 56))
+    rotated = np.ascontiguousarray(np.rot90(frame))  # 128×96: pixel (x, y) → (y, 127 - x)
+    scores = model.scores(rotated)
+    best = tuple(int(v) for v in np.unravel_index(np.argmax(scores), scores.shape))
+    assert best in box_containing(model, rotated.shape, (56, 127 - 40))
+    darker = (frame.astype(np.float32) * 0.7).astype(np.uint8)
+    scores = model.scores(darker)
+    best = tuple(int(v) for v in np.unravel_index(np.argmax(scores), scores.shape))
+    assert best in box_containing(model, frame.shape, (40, 56))
+
+
+def test_detector_with_several_models_equals_each_model_alone(model: RFCH) -> None:
+    frame, mask = scene(7, centre=(70, 60))
+    other = RFCH.train("clouds", [frame], [~mask], n_clusters=12, seed=4)
+    third = RFCH.train("coarse", [frame], [mask], n_clusters=8, sigmas=(3.0,), sample_step=1)
+    test_frame, _ = scene(8)
+    together = Detector([model, other, third]).scores(test_frame)
+    assert together.shape[0] == 3
+    for index, alone in enumerate([model, other, third]):
+        np.testing.assert_array_equal(together[index], alone.scores(test_frame))
+
+
+def test_training_is_reproducible_with_a_seed() -> None:
+    frame, mask = scene(9)
+    first = RFCH.train("a", [frame], [mask], n_clusters=12, seed=5)
+    again = RFCH.train("a", [frame], [mask], n_clusters=12, seed=5)
+    other = RFCH.train("a", [frame], [mask], n_clusters=12, seed=6)
+    np.testing.assert_array_equal(first.centres, again.centres)
+    np.testing.assert_array_equal(first.histograms, again.histograms)
+    assert not np.array_equal(first.centres, other.centres)
+
+
+def test_views_merged_or_per_view() -> None:
+    views = [scene(s, centre=(60, 50), angle_deg=a) for s, a in ((10, 0.0), (11, 45.0))]
+    images, masks = zip(*views, strict=True)
+    merged = RFCH.train("m", images, masks, **SMALL)
+    per_view = RFCH.train("p", images, masks, views="per_view", **SMALL)
+    assert merged.histograms.shape == (1, 16, 16)
+    assert per_view.histograms.shape == (2, 16, 16)
+    np.testing.assert_allclose(per_view.histograms.sum(axis=(1, 2)), 1.0, atol=1e-5)
+    np.testing.assert_allclose(merged.histograms.sum(), 1.0, atol=1e-5)
+    # A per-view model scores each patch by its best view, so never below view 0 alone.
+    frame, _ = scene(12)
+    view0 = RFCH(
+        "v0",
+        per_view.params,
+        per_view.offset,
+        per_view.scale,
+        per_view.centres,
+        per_view.radius,
+        per_view.histograms[:1],
+    )
+    assert np.all(per_view.scores(frame) >= view0.scores(frame))
+
+
+# ------------------------------------------------------------------ patch grid
+
+
+def test_default_grid_gives_a_320_px_frame_16_to_32_columns_that_cover_it() -> None:
+    grid = RFCHParams().grid
+    spans = grid.column_spans(320)
+    assert 16 <= len(spans) <= 32
+    assert spans[0, 0] == 0 and spans[-1, 1] == 320
+    assert np.all(np.diff(spans[:, 0]) > 0)
+    wedges = CameraModel().wedges(Pose2D(1.0, 2.0, 0.0), 0.0, spans)
+    assert wedges.shape == (len(spans), 2)
+    assert wedges[0, 1] == pytest.approx(math.radians(22.5))
+
+
+def test_a_grid_that_does_not_tile_adds_an_edge_aligned_patch() -> None:
+    grid = PatchGrid(size=30, stride=20)
+    assert list(grid.starts(100)) == [0, 20, 40, 60, 70]
+    boxes = grid.boxes((50, 100))
+    assert boxes.shape == (2, 5, 4)
+    assert boxes[-1, -1].tolist() == [70, 20, 100, 50]
+
+
+# ------------------------------------------------------------------ files
+
+
+def test_save_load_round_trip(model: RFCH, tmp_path) -> None:
+    path = tmp_path / "rings.rfch.npz"
+    model.save(path)
+    loaded = RFCH.load(path)
+    assert loaded.name == model.name and loaded.params == model.params
+    assert loaded.summary == model.summary
+    frame, _ = scene(4)
+    np.testing.assert_array_equal(loaded.scores(frame), model.scores(frame))
+
+
+def test_corrupt_or_foreign_model_files_are_clear_errors(model: RFCH, tmp_path) -> None:
+    garbage = tmp_path / "garbage.npz"
+    garbage.write_bytes(b"not a zip file")
+    with pytest.raises(FileFormatError, match="not a readable rfch-model"):
+        RFCH.load(garbage)
+    foreign = tmp_path / "grid.npz"
+    save_arrays(foreign, "grid", 1, {}, {"cells": np.zeros(3)})
+    with pytest.raises(FileFormatError, match="not a 'rfch-model' file"):
+        RFCH.load(foreign)
+    truncated = tmp_path / "truncated.npz"
+    save_arrays(truncated, "rfch-model", 1, {"name": "x", "params": {}}, {"offset": np.zeros(6)})
+    with pytest.raises(FileFormatError, match="re-train"):
+        RFCH.load(truncated)
+    wrong = tmp_path / "wrong.npz"
+    save_arrays(
+        wrong,
+        "rfch-model",
+        1,
+        {"name": "x", "params": model.params.to_json()},
+        {
+            "offset": model.offset,
+            "scale": model.scale,
+            "centres": model.centres[:, :3],
+            "radius": model.radius,
+            "histograms": model.histograms,
+        },
+    )
+    with pytest.raises(FileFormatError, match="centres"):
+        RFCH.load(wrong)
+    with pytest.raises(FileFormatError, match="no such file"):
+        RFCH.load(tmp_path / "missing.npz")
+
+
+# ------------------------------------------------------------------ bad input
+
+
+@pytest.mark.parametrize(
+    ("frame", "message"),
+    [
+        (np.zeros((96, 128), np.uint8), "H×W×3"),
+        (np.zeros((96, 128, 4), np.uint8), "H×W×3"),
+        (np.ones((96, 128, 3), np.float64), "uint8"),
+        (np.full((96, 128, 3), np.nan), "NaN"),
+        (np.full((96, 128, 3), 77, np.uint8), "constant"),
+        (np.arange(20 * 20 * 3, dtype=np.uint8).reshape(20, 20, 3), "smaller than the patch"),
+        ([[1, 2, 3]], "numpy array"),
+    ],
+)
+def test_bad_frames_are_clear_errors(model: RFCH, frame, message) -> None:
+    with pytest.raises(InputError, match=message):
+        model.scores(frame)
+
+
+def test_bad_training_input_is_a_clear_error() -> None:
+    frame, mask = scene(0)
+    with pytest.raises(InputError, match="empty"):
+        RFCH.train("x", [frame], [np.zeros_like(mask)])
+    with pytest.raises(InputError, match="dtype bool"):
+        RFCH.train("x", [frame], [mask.astype(np.uint8)])
+    with pytest.raises(InputError, match="match their images"):
+        RFCH.train("x", [frame], [mask[:50]])
+    with pytest.raises(InputError, match="2 training images but 1 masks"):
+        RFCH.train("x", [frame, frame], [mask])
+    with pytest.raises(InputError, match="at least one image"):
+        RFCH.train("x", [], [])
+    with pytest.raises(InputError, match="name"):
+        RFCH.train("", [frame], [mask], **SMALL)
+    one_pixel = np.zeros_like(mask)
+    one_pixel[40, 40] = True
+    with pytest.raises(InputError, match="distinct descriptors"):
+        RFCH.train("x", [frame], [one_pixel])
+    with pytest.raises(InputError, match="unknown RFCH parameters"):
+        RFCH.train("x", [frame], [mask], clusters=3)
+
+
+@pytest.mark.parametrize(
+    ("params", "message"),
+    [
+        ({"n_clusters": 1}, "n_clusters"),
+        ({"alpha": 0.0}, "alpha"),
+        ({"d_max": float("nan")}, "d_max"),
+        ({"sigmas": (2.0, -1.0)}, "sigma"),
+        ({"responses": ("curvature",)}, "responses"),
+        ({"views": "best"}, "views"),
+        ({"patch_size": 16, "stride": 20}, "stride"),
+        ({"sample_step": 4, "d_max": 3.0}, "no pair"),
+        ({"colour_weight": True}, "colour_weight"),
+    ],
+)
+def test_bad_parameters_are_clear_errors(params, message) -> None:
+    with pytest.raises(InputError, match=message):
+        RFCHParams(**params)
+
+
+def test_detector_refuses_models_with_different_grids(model: RFCH) -> None:
+    frame, mask = scene(0)
+    coarse = RFCH.train("x", [frame], [mask], n_clusters=8, patch_size=48, stride=24)
+    with pytest.raises(InputError, match="same patch size"):
+        Detector([model, coarse])
+    with pytest.raises(InputError, match="at least one"):
+        Detector([])
+
+
+# ------------------------------------------------------------------ ROC
+
+
+def test_column_truth_and_roc() -> None:
+    grid = PatchGrid(size=20, stride=10)
+    mask = np.zeros((40, 100), dtype=bool)
+    mask[5:25, 30:52] = True  # covers columns starting at 30, 40 fully; 20 and 50 partly
+    truth = column_truth(mask, grid, min_cover=0.25)
+    assert list(grid.starts(100)) == [0, 10, 20, 30, 40, 50, 60, 70, 80]
+    assert truth.tolist() == [0, 0, 1, 1, 1, -1, 0, 0, 0]
+    scores = np.array([0.1, 0.2, 0.7, 0.9, 0.8, 0.95, 0.3, 0.6, 0.1])
+    roc = roc_curve(scores, truth)
+    assert (roc.positives, roc.negatives) == (3, 5)
+    assert roc.auc == pytest.approx(1.0)
+    threshold, p_fp, p_fn = roc.choose()
+    assert (p_fp, p_fn) == (0.0, 0.0) and 0.6 < threshold <= 0.7
+    swapped = roc_curve(1.0 - scores, truth)
+    assert swapped.auc == pytest.approx(0.0)
+    with pytest.raises(InputError, match="positive and negative"):
+        roc_curve(scores, np.zeros(9))

@@ -1,0 +1,53 @@
+"""The compiled fast path against the literal NumPy reference, and the cost of sampling pixels."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from twin.rfch import RFCH
+from twin.rfch.descriptor import raw_descriptors, sample
+from twin.rfch.reference import reference_labels, reference_scores
+from twin.rfch.synthetic import cloudy_background, paste, striped_object
+
+
+def frames(seed: int, step: int) -> tuple[RFCH, list[np.ndarray]]:
+    rng = np.random.default_rng(seed)
+    obj, mask = striped_object(36)
+    train, train_mask = paste(cloudy_background(rng, 72, 96), obj, mask, (48, 36))
+    model = RFCH.train(
+        "rings", [train], [train_mask], n_clusters=12, sample_step=step, patch_size=24, stride=8
+    )
+    tests = [
+        paste(cloudy_background(rng, 72, 96), obj, mask, (30 + 9 * i, 40), angle_deg=20.0 * i)[0]
+        for i in range(3)
+    ]
+    return model, tests
+
+
+@pytest.mark.parametrize("step", [1, 2, 3])
+def test_fast_path_equals_the_literal_reference(step: int) -> None:
+    model, tests = frames(step, step)
+    for frame in tests:
+        labels = model.label(sample(raw_descriptors(frame, model.params), step))
+        np.testing.assert_array_equal(labels, reference_labels(model, frame))
+        assert (labels >= 0).mean() > 0.05  # the comparison must involve real pairs
+        np.testing.assert_allclose(model.scores(frame), reference_scores(model, frame), atol=1e-5)
+
+
+def test_sampling_every_second_pixel_barely_changes_the_scores() -> None:
+    """sample_step=2 (the default, 16× fewer pairs) against the spec verbatim (step 1).
+
+    Same training data and seed; the step-2 scores are compared with the exact step-1 reference
+    on frames with the object at known places. Measured here: correlation ≈ 0.99, mean absolute
+    difference 0.03–0.06 (sampling loses a little of the match), and the patch step 2 picks is
+    an exact near-best (neighbouring overlapping patches are near ties).
+    """
+    exact_model, tests = frames(7, 1)
+    fast_model, _ = frames(7, 2)
+    for frame in tests:
+        exact = reference_scores(exact_model, frame)
+        fast = fast_model.scores(frame)
+        assert exact.flat[fast.argmax()] >= 0.95 * exact.max()
+        assert np.corrcoef(exact.ravel(), fast.ravel())[0, 1] > 0.97
+        assert np.abs(exact - fast).mean() < 0.08
