@@ -8,8 +8,8 @@ Outputs (beside this file):
 - ``textures/rice_box.png``: the target's print, a multi-coloured rice packet (2:3 like its
   0.2 m x 0.3 m face);
 - ``textures/floor.png``, ``wall.png``, ``fabric.png``, ``wood_dark.png``: room surfaces;
-- ``bookcase_contents.xml``: the bookcase's carcass and the books and boxes on its shelves (many colours),
-  included into the living room inside the ``bookcase`` body.
+- ``bookcase_contents.xml``: the bookcase's carcass and the books and boxes on its shelves (many
+  colours), included into the living room inside the ``bookcase`` body.
 """
 
 from __future__ import annotations
@@ -25,7 +25,8 @@ SEED = 20090101
 
 def _write_png(path: Path, rgb: np.ndarray) -> None:
     path.parent.mkdir(parents=True, exist_ok=True)
-    ok, buf = cv2.imencode(".png", cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR), [cv2.IMWRITE_PNG_COMPRESSION, 9])
+    bgr = cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR)
+    ok, buf = cv2.imencode(".png", bgr, [cv2.IMWRITE_PNG_COMPRESSION, 9])
     if not ok:
         raise RuntimeError(f"could not encode {path}")
     path.write_bytes(buf.tobytes())
@@ -40,7 +41,8 @@ def rice_box() -> np.ndarray:
     img[44:50] = (250, 200, 0)  # gold rule
     img[150:] = (20, 60, 170)  # blue band
     img[144:150] = (250, 200, 0)
-    cv2.putText(img, "RICE", (14, 34), cv2.FONT_HERSHEY_DUPLEX, 1.15, (255, 255, 255), 2, cv2.LINE_AA)
+    white = (255, 255, 255)
+    cv2.putText(img, "RICE", (14, 34), cv2.FONT_HERSHEY_DUPLEX, 1.15, white, 2, cv2.LINE_AA)
     # a bowl of rice
     cv2.ellipse(img, (64, 112), (40, 26), 0, 0, 180, (240, 170, 0), -1, cv2.LINE_AA)
     cv2.ellipse(img, (64, 110), (40, 10), 0, 180, 360, (255, 255, 250), -1, cv2.LINE_AA)
@@ -52,7 +54,7 @@ def rice_box() -> np.ndarray:
         for j in range(4):
             cx = x0 + lean * (4 - j) // 5
             cv2.ellipse(img, (cx, 62 + 8 * j), (5, 3), 30, 0, 360, (230, 190, 60), -1)
-    cv2.putText(img, "5 kg", (42, 178), cv2.FONT_HERSHEY_SIMPLEX, 0.7, (255, 255, 255), 2, cv2.LINE_AA)
+    cv2.putText(img, "5 kg", (42, 178), cv2.FONT_HERSHEY_SIMPLEX, 0.7, white, 2, cv2.LINE_AA)
     cv2.rectangle(img, (0, 0), (w - 1, h - 1), (120, 10, 20), 2)
     return img
 
@@ -74,8 +76,10 @@ def floor(rng: np.random.Generator) -> np.ndarray:
     return np.clip(img, 0, 255).astype(np.uint8)
 
 
-def noise(rng: np.random.Generator, rgb: tuple[int, int, int], amp: float, size: int = 64,
-          blur: float = 0.8) -> np.ndarray:
+def noise(
+    rng: np.random.Generator, rgb: tuple[int, int, int], amp: float, size: int = 64,
+    blur: float = 0.8,
+) -> np.ndarray:
     """A flat colour with fine blurred noise: plaster, fabric."""
     n = cv2.GaussianBlur(rng.normal(0, 1, (size, size)).astype(np.float32), (0, 0), blur)
     img = np.array(rgb, np.float32) + amp * n[..., None]

@@ -1,0 +1,274 @@
+"""What a camera, a pan-tilt unit and a mobile base promise, whoever implements them.
+
+One abstract class per role (LeRobot style): the MuJoCo twin (``twin.sim``) and the serial
+hardware drivers (``hardware/``) implement them, and the survey mission talks to a robot only
+through them. Every device is a context manager: ``connect()`` on entry, ``close()`` on exit;
+calls on a device that is not connected raise ``NotConnectedError``.
+
+Units at this interface: metres, radians, seconds, radians per second; map frame as in
+``twin.geometry`` (pan positive to the left, tilt positive up). Degrees and wire units belong to
+the drivers. Blocking calls return when the motion has finished (or raise), so the image grabbed
+next is taken from where the robot says it is.
+
+Errors are ``DeviceError`` (a ``TwinError``): one line naming the device, what was asked, what
+was seen, and what to do.
+"""
+
+from __future__ import annotations
+
+import math
+from abc import ABC, abstractmethod
+from dataclasses import dataclass
+from types import TracebackType
+
+import numpy as np
+
+from twin.errors import TwinError
+from twin.geometry import CameraModel, Pose2D, require_finite
+
+# -- errors -------------------------------------------------------------------------------------
+
+
+class DeviceError(TwinError):
+    """A device failed: ``device`` did not do ``asked`` because of ``seen``; ``remedy`` helps."""
+
+    def __init__(self, device: str, asked: str, seen: str, remedy: str) -> None:
+        self.device, self.asked, self.seen, self.remedy = device, asked, seen, remedy
+        super().__init__(f"{device}: {asked}: {seen}; {remedy}")
+
+
+class NotConnectedError(DeviceError):
+    """The device was used before ``connect()`` or after ``close()``."""
+
+
+class DeviceTimeoutError(DeviceError):
+    """The device did not answer, or did not finish a motion, within the allowed time."""
+
+
+class OutOfRangeError(DeviceError):
+    """A command's argument lies outside what the device can do (angle, speed, pose)."""
+
+
+class DeviceBusyError(DeviceError):
+    """The device refused a command because an earlier one is still running."""
+
+
+class ProtocolError(DeviceError):
+    """The device's answer was malformed: bad checksum, truncated, unexpected bytes."""
+
+
+class DeviceFaultError(DeviceError):
+    """The device reported a fault: motor stall, bumper hit, camera system error."""
+
+
+class ConnectionLostError(DeviceError):
+    """The link to the device vanished (port closed, camera unplugged)."""
+
+
+# -- data ---------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Frame:
+    """One camera image: H x W x 3 uint8 RGB, row 0 at the top; ``timestamp`` in seconds on
+    the robot's clock (simulated time in the twin, ``time.monotonic()`` on hardware)."""
+
+    image: np.ndarray
+    timestamp: float
+
+
+@dataclass(frozen=True)
+class View:
+    """An image with where it was taken from: the base pose (map frame) and the head's pan and
+    tilt (radians) at capture. This is what a bearing wedge is projected from."""
+
+    image: np.ndarray
+    pose: Pose2D
+    pan: float
+    tilt: float
+    timestamp: float
+
+
+@dataclass(frozen=True)
+class PanTiltLimits:
+    """Angle limits (rad) and top speeds (rad/s) of a pan-tilt unit."""
+
+    pan_min: float
+    pan_max: float
+    tilt_min: float
+    tilt_max: float
+    pan_speed: float
+    tilt_speed: float
+
+    def check(self, device: str, pan: float, tilt: float, speed: float | None = None) -> None:
+        """Raise ``OutOfRangeError`` unless the angles and the optional pan speed are reachable."""
+        asked = f"move to pan {math.degrees(pan):.1f} deg, tilt {math.degrees(tilt):.1f} deg"
+        if not (math.isfinite(pan) and math.isfinite(tilt)):
+            raise OutOfRangeError(device, asked, "the angles are not finite", "pass numbers")
+        if not self.pan_min <= pan <= self.pan_max:
+            raise OutOfRangeError(
+                device, asked, f"pan outside [{math.degrees(self.pan_min):.1f}, "
+                f"{math.degrees(self.pan_max):.1f}] deg", "turn the base for wider headings")
+        if not self.tilt_min <= tilt <= self.tilt_max:
+            raise OutOfRangeError(
+                device, asked, f"tilt outside [{math.degrees(self.tilt_min):.1f}, "
+                f"{math.degrees(self.tilt_max):.1f}] deg", "choose a reachable tilt")
+        if speed is not None and not 0.0 < speed <= self.pan_speed:
+            raise OutOfRangeError(
+                device, f"{asked} at {speed!r} rad/s", "speed outside (0, "
+                f"{self.pan_speed:.3f}] rad/s", "use a positive speed within the unit's maximum")
+
+
+# The Canon VC-C4's mechanical limits and top speeds (specs/protocols.md, section A6).
+VCC4_LIMITS = PanTiltLimits(
+    pan_min=math.radians(-100.0),
+    pan_max=math.radians(100.0),
+    tilt_min=math.radians(-30.0),
+    tilt_max=math.radians(90.0),
+    pan_speed=math.radians(90.0),
+    tilt_speed=math.radians(70.0),
+)
+
+
+# -- devices ------------------------------------------------------------------------------------
+
+
+class Device(ABC):
+    """Connect/close lifecycle shared by every device. ``name`` appears in every error."""
+
+    name: str = "device"
+
+    @abstractmethod
+    def connect(self) -> None:
+        """Open the link and bring the device to a known state; idempotent."""
+
+    @abstractmethod
+    def close(self) -> None:
+        """Stop any motion and release the link; safe to call twice."""
+
+    @property
+    @abstractmethod
+    def is_connected(self) -> bool: ...
+
+    def require_connected(self, asked: str) -> None:
+        if not self.is_connected:
+            raise NotConnectedError(self.name, asked, "the device is not connected",
+                                    "use it inside 'with device:' or call connect() first")
+
+    def __enter__(self) -> Device:
+        self.connect()
+        return self
+
+    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
+                 tb: TracebackType | None) -> None:
+        self.close()
+
+
+class Camera(Device):
+    """A camera delivering RGB frames of a known geometry."""
+
+    @property
+    @abstractmethod
+    def model(self) -> CameraModel:
+        """Image size and horizontal field of view: the pixel column <-> bearing mapping."""
+
+    @abstractmethod
+    def grab(self) -> Frame:
+        """The newest frame taken after this call began (never a stale buffered one)."""
+
+
+class PanTilt(Device):
+    """A pan-tilt head. Angles in radians, pan positive left, tilt positive up."""
+
+    @property
+    @abstractmethod
+    def limits(self) -> PanTiltLimits: ...
+
+    @abstractmethod
+    def move_to(self, pan: float, tilt: float = 0.0, *, speed: float | None = None,
+                timeout: float = 10.0) -> tuple[float, float]:
+        """Move and wait until there; ``speed`` (rad/s) caps pan and tilt speed (default: the
+        unit's top speeds). Returns the reached (pan, tilt). ``OutOfRangeError`` if
+        unreachable, ``DeviceTimeoutError`` if not there within ``timeout`` seconds."""
+
+    @abstractmethod
+    def position(self) -> tuple[float, float]:
+        """Current (pan, tilt) in radians."""
+
+    @abstractmethod
+    def stop(self) -> None:
+        """Stop moving where the head is."""
+
+
+class Base(Device):
+    """A mobile base that knows its pose in the map frame (from odometry, or better)."""
+
+    @abstractmethod
+    def pose(self) -> Pose2D:
+        """The base's own estimate of its pose (map frame): what a view is projected from."""
+
+    @abstractmethod
+    def set_pose(self, pose: Pose2D) -> None:
+        """Declare the current pose in the map frame (re-anchors the odometry; moves nothing)."""
+
+    @abstractmethod
+    def go_to(self, goal: Pose2D, *, timeout: float = 60.0) -> Pose2D:
+        """Drive to ``goal`` (turn, drive straight, turn) and stop within 5 cm and 3 degrees of
+        it; returns the final pose estimate. ``DeviceTimeoutError`` if not there in time,
+        ``DeviceFaultError`` on a stall or bumper hit."""
+
+    @abstractmethod
+    def drive(self, speed: float, turn_rate: float, duration: float) -> Pose2D:
+        """Drive at ``speed`` (m/s) and ``turn_rate`` (rad/s, CCW positive) for ``duration``
+        seconds, then stop; returns the pose estimate."""
+
+    @abstractmethod
+    def stop(self) -> None:
+        """Stop the wheels."""
+
+
+@dataclass
+class Robot:
+    """The three devices of a survey robot; connecting it connects all three (closing those
+    already open if one fails), and ``capture`` takes one ``View``."""
+
+    camera: Camera
+    pantilt: PanTilt
+    base: Base
+
+    def connect(self) -> None:
+        opened: list[Device] = []
+        try:
+            for device in (self.base, self.pantilt, self.camera):
+                device.connect()
+                opened.append(device)
+        except BaseException:
+            for device in reversed(opened):
+                device.close()
+            raise
+
+    def close(self) -> None:
+        errors: list[BaseException] = []
+        for device in (self.camera, self.pantilt, self.base):
+            try:
+                device.close()
+            except Exception as exc:  # close every device even if one fails
+                errors.append(exc)
+        if errors:
+            raise errors[0]
+
+    def __enter__(self) -> Robot:
+        self.connect()
+        return self
+
+    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
+                 tb: TracebackType | None) -> None:
+        self.close()
+
+    def capture(self) -> View:
+        """Grab a frame and pair it with the base pose and head angles at that moment."""
+        frame = self.camera.grab()
+        pan, tilt = self.pantilt.position()
+        pose = self.base.pose()
+        require_finite("view pose", pose.x, pose.y, pose.yaw, pan, tilt)
+        return View(frame.image, pose, pan, tilt, frame.timestamp)

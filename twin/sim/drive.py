@@ -1,0 +1,139 @@
+"""Differential-drive kinematics: wheel odometry and a turn-drive-turn go-to-pose controller.
+
+Pure arithmetic, no MuJoCo: the sim feeds it wheel angles and applies the wheel speeds it
+returns, exactly as a real base's firmware would. Units: metres, radians, seconds.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from twin.geometry import Pose2D, wrap_angle
+
+
+@dataclass(frozen=True)
+class DiffDriveGeometry:
+    """Wheel radius and track (distance between the wheels' contact points), metres."""
+
+    wheel_radius: float
+    track: float
+
+    def wheel_speeds(self, v: float, omega: float) -> tuple[float, float]:
+        """Left and right wheel angular speeds (rad/s) for body speed v (m/s), turn rate (rad/s)."""
+        half = 0.5 * self.track * omega
+        return (v - half) / self.wheel_radius, (v + half) / self.wheel_radius
+
+
+class Odometry:
+    """Dead reckoning from wheel angle increments (exact arcs, not Euler steps)."""
+
+    def __init__(self, geometry: DiffDriveGeometry, pose: Pose2D, left: float, right: float):
+        self.geometry = geometry
+        self.reset(pose, left, right)
+
+    def reset(self, pose: Pose2D, left: float, right: float) -> None:
+        """Declare the current pose; ``left``/``right`` are the wheel angles now (rad)."""
+        self.x, self.y, self.yaw = pose.x, pose.y, pose.yaw
+        self._left, self._right = left, right
+
+    def update(self, left: float, right: float) -> None:
+        r = self.geometry.wheel_radius
+        dl, dr = (left - self._left) * r, (right - self._right) * r
+        self._left, self._right = left, right
+        ds, dyaw = 0.5 * (dl + dr), (dr - dl) / self.geometry.track
+        # chord of the arc, taken along the mean heading
+        chord = ds if abs(dyaw) < 1e-9 else 2.0 * ds / dyaw * math.sin(0.5 * dyaw)
+        heading = self.yaw + 0.5 * dyaw
+        self.x += chord * math.cos(heading)
+        self.y += chord * math.sin(heading)
+        self.yaw = float(wrap_angle(self.yaw + dyaw))
+
+    @property
+    def pose(self) -> Pose2D:
+        return Pose2D(self.x, self.y, self.yaw)
+
+
+@dataclass(frozen=True)
+class DriveLimits:
+    """Speed and acceleration limits of the base (Pioneer-class defaults, gentle indoors)."""
+
+    speed: float = 0.5  # m/s
+    accel: float = 0.6  # m/s^2
+    turn_rate: float = math.radians(100.0)  # rad/s
+    turn_accel: float = math.radians(250.0)  # rad/s^2
+
+
+def _approach(error: float, vmax: float, decel: float, gain: float) -> float:
+    """Speed toward zero error: capped, slowing so that it can stop in time, linear at the end."""
+    mag = min(vmax, math.sqrt(2.0 * decel * abs(error)), gain * abs(error))
+    return math.copysign(mag, error)
+
+
+class GoToController:
+    """Turn toward the goal, drive straight to it, then turn to the goal's yaw.
+
+    Closed on the odometry estimate (what a real base knows). ``command(pose, dt)`` returns the
+    body speed and turn rate to apply for the next ``dt`` seconds; ``done`` turns true once the
+    final yaw is within ``yaw_tolerance`` and the position within ``xy_tolerance``.
+    The internal tolerances are tighter than the 5 cm / 3 degree promise so that wheel slip and
+    servo lag still land inside it.
+    """
+
+    def __init__(self, goal: Pose2D, limits: DriveLimits = DriveLimits(),
+                 xy_tolerance: float = 0.01, yaw_tolerance: float = math.radians(0.7)) -> None:
+        self.goal = goal
+        self.limits = limits
+        self.xy_tolerance = xy_tolerance
+        self.yaw_tolerance = yaw_tolerance
+        self.phase = "turn"
+        self._v = 0.0
+        self._w = 0.0
+
+    @property
+    def done(self) -> bool:
+        return self.phase == "done"
+
+    def _ramp(self, v: float, w: float, dt: float) -> tuple[float, float]:
+        dv = self.limits.accel * dt
+        dw = self.limits.turn_accel * dt
+        self._v = min(max(v, self._v - dv), self._v + dv)
+        self._w = min(max(w, self._w - dw), self._w + dw)
+        return self._v, self._w
+
+    def command(self, pose: Pose2D, dt: float) -> tuple[float, float]:
+        lim = self.limits
+        dx, dy = self.goal.x - pose.x, self.goal.y - pose.y
+        dist = math.hypot(dx, dy)
+        if self.phase == "turn":
+            if dist <= self.xy_tolerance:
+                self.phase = "align"
+            else:
+                err = float(wrap_angle(math.atan2(dy, dx) - pose.yaw))
+                if abs(err) < math.radians(1.0) and abs(self._w) < 0.05:
+                    self.phase = "drive"
+                else:
+                    return self._ramp(0.0, _approach(err, lim.turn_rate, 0.5 * lim.turn_accel, 4.0),
+                                      dt)
+        if self.phase == "drive":
+            along = dx * math.cos(pose.yaw) + dy * math.sin(pose.yaw)
+            if along <= self.xy_tolerance * 0.5:
+                self.phase = "settle"
+            else:
+                # steer at the goal point while far, straight once close (avoids spinning on it)
+                heading = float(wrap_angle(math.atan2(dy, dx) - pose.yaw)) if dist > 0.1 else 0.0
+                v = _approach(along, lim.speed, 0.5 * lim.accel, 3.0)
+                return self._ramp(v, 2.0 * heading, dt)
+        if self.phase == "settle":
+            if abs(self._v) < 1e-3:
+                self.phase = "align"
+            else:
+                return self._ramp(0.0, 0.0, dt)
+        if self.phase == "align":
+            err = pose.heading_error_to(self.goal)
+            if abs(err) < self.yaw_tolerance and abs(self._w) < 0.05:
+                # a drive that ended off the goal (slip, a nudge) starts over, else done
+                self.phase = "turn" if dist > 3.0 * self.xy_tolerance else "done"
+            else:
+                return self._ramp(0.0, _approach(err, lim.turn_rate, 0.5 * lim.turn_accel, 4.0), dt)
+        return self._ramp(0.0, 0.0, dt)

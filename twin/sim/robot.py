@@ -1,0 +1,371 @@
+"""The simulated Peoplebot: wheel and head servos driven through the physics, wheel odometry,
+and the sim implementations of ``twin.devices`` that share one ``World``.
+
+Nothing here moves the robot by writing its pose except ``SimRobot.place``, which sets the
+start of a run (like lifting the robot onto its start mark). Driving and panning go through the
+actuators: the base by wheel speeds, the head by speed commands that the VC-C4-limited servos
+integrate (see models/peoplebot.xml).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+
+import mujoco
+import numpy as np
+
+from twin.devices import (
+    Base,
+    Camera,
+    DeviceFaultError,
+    DeviceTimeoutError,
+    Frame,
+    OutOfRangeError,
+    PanTilt,
+    PanTiltLimits,
+    Robot,
+)
+from twin.errors import InputError
+from twin.geometry import CameraModel, Pose2D
+from twin.sim.drive import DiffDriveGeometry, DriveLimits, GoToController, Odometry
+from twin.sim.render import FrameRenderer
+from twin.sim.world import DEFAULT_SCENE, World
+
+CAMERA_NAME = "head_camera"
+PAPER_CAMERA = CameraModel()  # 320x240, 45 degrees horizontal: the paper's camera
+GENTLE = DriveLimits()
+HEAD_TOLERANCE = math.radians(0.2)  # a pan-tilt move is over when the joint is this close
+
+
+def _id(model: mujoco.MjModel, kind: mujoco.mjtObj, name: str) -> int:
+    idx = mujoco.mj_name2id(model, kind, name)
+    if idx < 0:
+        raise InputError(f"the scene has no {kind.name[6:].lower()} named {name!r}; "
+                         "does it include models/peoplebot.xml?")
+    return idx
+
+
+class SimRobot:
+    """The Peoplebot in a ``World``: the one place that steps the physics for it.
+
+    Every blocking motion advances simulated time by stepping the world, applying the wheel and
+    head controls and integrating odometry at every physics step.
+    """
+
+    def __init__(self, world: World, start: Pose2D | None = None,
+                 limits: DriveLimits = GENTLE) -> None:
+        self.world = world
+        m = world.model
+        self.drive_limits = limits
+        self._base = _id(m, mujoco.mjtObj.mjOBJ_BODY, "base")
+        self._free_qpos = int(m.jnt_qposadr[_id(m, mujoco.mjtObj.mjOBJ_JOINT, "base")])
+        self._free_qvel = int(m.jnt_dofadr[_id(m, mujoco.mjtObj.mjOBJ_JOINT, "base")])
+        self._wheel_qpos = [int(m.jnt_qposadr[_id(m, mujoco.mjtObj.mjOBJ_JOINT, n)])
+                            for n in ("left_wheel", "right_wheel")]
+        self._wheel_act = [_id(m, mujoco.mjtObj.mjOBJ_ACTUATOR, n)
+                           for n in ("left_wheel", "right_wheel")]
+        self._head_qpos = [int(m.jnt_qposadr[_id(m, mujoco.mjtObj.mjOBJ_JOINT, n)])
+                           for n in ("pan", "tilt")]
+        self._head_act = [_id(m, mujoco.mjtObj.mjOBJ_ACTUATOR, n) for n in ("pan", "tilt")]
+        self._head_actadr = [int(m.actuator_actadr[a]) for a in self._head_act]
+        self.camera_id = _id(m, mujoco.mjtObj.mjOBJ_CAMERA, CAMERA_NAME)
+        # geometry read from the model, so odometry and the MJCF cannot disagree
+        wheel_geom = _id(m, mujoco.mjtObj.mjOBJ_GEOM, "left_wheel")
+        left = m.body_pos[_id(m, mujoco.mjtObj.mjOBJ_BODY, "left_wheel")]
+        right = m.body_pos[_id(m, mujoco.mjtObj.mjOBJ_BODY, "right_wheel")]
+        self.geometry = DiffDriveGeometry(float(m.geom_size[wheel_geom, 0]),
+                                          float(np.linalg.norm(left - right)))
+        lo, hi = m.actuator_ctrlrange[self._head_act[0]]
+        tlo, thi = m.actuator_ctrlrange[self._head_act[1]]
+        plo, phi = m.actuator_actrange[self._head_act[0]]
+        klo, khi = m.actuator_actrange[self._head_act[1]]
+        self.head_limits = PanTiltLimits(float(plo), float(phi), float(klo), float(khi),
+                                         float(min(-lo, hi)), float(min(-tlo, thi)))
+        self._head_goal = [0.0, 0.0]
+        self._head_speed = [self.head_limits.pan_speed, self.head_limits.tilt_speed]
+        self._wheels = (0.0, 0.0)
+        self.odometry = Odometry(self.geometry, Pose2D(0.0, 0.0, 0.0), 0.0, 0.0)
+        self.place(start or world.robot_start() or Pose2D(0.0, 0.0, 0.0))
+
+    # -- state ----------------------------------------------------------------------------------
+    def _wheel_angles(self) -> tuple[float, float]:
+        q = self.world.data.qpos
+        return float(q[self._wheel_qpos[0]]), float(q[self._wheel_qpos[1]])
+
+    def truth_pose(self) -> Pose2D:
+        """Ground-truth pose of the base (map frame)."""
+        d = self.world.data
+        xmat = d.xmat[self._base].reshape(3, 3)
+        return Pose2D(float(d.xpos[self._base, 0]), float(d.xpos[self._base, 1]),
+                      math.atan2(xmat[1, 0], xmat[0, 0]))
+
+    def odometry_pose(self) -> Pose2D:
+        """The wheel-odometry estimate, anchored at the last ``place``/``set_pose``."""
+        return self.odometry.pose
+
+    def head(self) -> tuple[float, float]:
+        """Current (pan, tilt) joint angles, radians."""
+        q = self.world.data.qpos
+        return float(q[self._head_qpos[0]]), float(q[self._head_qpos[1]])
+
+    def camera_position(self) -> np.ndarray:
+        """Ground-truth optical centre (3,), metres."""
+        return self.world.data.cam_xpos[self.camera_id].copy()
+
+    # -- setting up -----------------------------------------------------------------------------
+    def place(self, pose: Pose2D, pan: float = 0.0, tilt: float = 0.0, settle: float = 0.3) -> None:
+        """Put the robot at rest at ``pose`` with the head at (pan, tilt), then let it settle.
+
+        Only for the start of a run; odometry is anchored to ``pose``.
+        """
+        self.head_limits.check("sim pan-tilt", pan, tilt)
+        d = self.world.data
+        d.qpos[self._free_qpos:self._free_qpos + 7] = (
+            pose.x, pose.y, 0.0, math.cos(pose.yaw / 2), 0.0, 0.0, math.sin(pose.yaw / 2))
+        d.qvel[self._free_qvel:self._free_qvel + 6] = 0.0
+        for qadr, actadr, angle in zip(self._head_qpos, self._head_actadr, (pan, tilt),
+                                       strict=True):
+            d.qpos[qadr] = angle
+            d.act[actadr] = angle
+        self._head_goal = [pan, tilt]
+        self._wheels = (0.0, 0.0)
+        self.world.forward()
+        self.advance(settle)
+        self.odometry.reset(pose, *self._wheel_angles())
+
+    # -- stepping -------------------------------------------------------------------------------
+    def _apply_controls(self) -> None:
+        d, dt = self.world.data, self.world.timestep
+        left, right = self._wheels
+        d.ctrl[self._wheel_act[0]] = left
+        d.ctrl[self._wheel_act[1]] = right
+        # head: speed command that lands the integrated setpoint on the goal without overshoot
+        for act, actadr, goal, speed in zip(self._head_act, self._head_actadr, self._head_goal,
+                                            self._head_speed, strict=True):
+            d.ctrl[act] = float(np.clip((goal - d.act[actadr]) / dt, -speed, speed))
+
+    def step(self) -> None:
+        self._apply_controls()
+        self.world.step()
+        self.odometry.update(*self._wheel_angles())
+
+    def advance(self, seconds: float) -> None:
+        """Let simulated time pass with the current commands."""
+        for _ in range(max(0, round(seconds / self.world.timestep))):
+            self.step()
+
+    def _run_until(self, finished: Callable[[], bool], timeout: float, what: str,
+                   device: str) -> None:
+        end = self.world.time + timeout
+        while not finished():
+            if self.world.time >= end:
+                raise DeviceTimeoutError(device, what, f"not finished after {timeout:g} s "
+                                         f"simulated (truth {self.truth_pose()})",
+                                         "check the path is free or allow more time")
+            self.step()
+
+    # -- base -----------------------------------------------------------------------------------
+    def set_wheel_speeds(self, v: float, omega: float) -> None:
+        limit = float(self.world.model.actuator_ctrlrange[self._wheel_act[0], 1])
+        left, right = self.geometry.wheel_speeds(v, omega)
+        self._wheels = (float(np.clip(left, -limit, limit)), float(np.clip(right, -limit, limit)))
+
+    def go_to(self, goal: Pose2D, timeout: float = 60.0) -> Pose2D:
+        """Drive to ``goal`` by wheel speeds (turn, drive, turn) closed on odometry."""
+        controller = GoToController(goal, self.drive_limits)
+        dt = self.world.timestep
+        end = self.world.time + timeout
+        stalled_since: float | None = None
+        while not controller.done:
+            if self.world.time >= end:
+                self.set_wheel_speeds(0.0, 0.0)
+                raise DeviceTimeoutError(
+                    "sim base", f"go to {goal}", f"not there after {timeout:g} s simulated; "
+                    f"odometry {self.odometry_pose()}", "check that the path is free of furniture")
+            self.set_wheel_speeds(*controller.command(self.odometry_pose(), dt))
+            self.step()
+            stalled_since = self._stall_check(stalled_since, goal)
+        self.set_wheel_speeds(0.0, 0.0)
+        self.advance(0.2)  # let the servos bring the wheels to rest
+        return self.odometry_pose()
+
+    def _stall_check(self, since: float | None, goal: Pose2D) -> float | None:
+        """Raise if the wheels are commanded but the base has not moved for a second."""
+        d = self.world.data
+        commanded = max(abs(self._wheels[0]), abs(self._wheels[1])) > 1.0
+        moving = float(np.linalg.norm(d.qvel[self._free_qvel:self._free_qvel + 6])) > 0.02
+        if not commanded or moving:
+            return None
+        if since is None:
+            return self.world.time
+        if self.world.time - since > 1.0:
+            self.set_wheel_speeds(0.0, 0.0)
+            raise DeviceFaultError("sim base", f"go to {goal}", "the wheels turn but the base "
+                                   f"does not move (stalled at {self.truth_pose()})",
+                                   "the path is blocked; choose another stop")
+        return since
+
+    def drive(self, speed: float, turn_rate: float, duration: float) -> Pose2D:
+        self.set_wheel_speeds(speed, turn_rate)
+        self.advance(duration)
+        self.set_wheel_speeds(0.0, 0.0)
+        self.advance(0.2)
+        return self.odometry_pose()
+
+    # -- head -----------------------------------------------------------------------------------
+    def move_head(self, pan: float, tilt: float, speed: float | None = None,
+                  timeout: float = 10.0) -> tuple[float, float]:
+        self.head_limits.check("sim pan-tilt", pan, tilt, speed)
+        self._head_goal = [pan, tilt]
+        self._head_speed = [min(speed or math.inf, self.head_limits.pan_speed),
+                            min(speed or math.inf, self.head_limits.tilt_speed)]
+        qvel_adr = [int(self.world.model.jnt_dofadr[self.world.model.actuator_trnid[a, 0]])
+                    for a in self._head_act]
+
+        def there() -> bool:
+            at = self.head()
+            still = max(abs(self.world.data.qvel[i]) for i in qvel_adr) < math.radians(1.0)
+            return still and all(abs(a - g) < HEAD_TOLERANCE
+                                 for a, g in zip(at, self._head_goal, strict=True))
+
+        self._run_until(there, timeout, f"move to pan {math.degrees(pan):.1f} deg, tilt "
+                        f"{math.degrees(tilt):.1f} deg", "sim pan-tilt")
+        return self.head()
+
+    def stop_head(self) -> None:
+        d = self.world.data
+        self._head_goal = [float(d.act[a]) for a in self._head_actadr]
+
+    def devices(self, camera: CameraModel = PAPER_CAMERA) -> Robot:
+        """The sim camera, pan-tilt and base as a ``twin.devices.Robot``."""
+        return Robot(SimCamera(self, camera), SimPanTilt(self), SimBase(self))
+
+
+class _SimDevice:
+    name = "sim device"
+
+    def __init__(self, robot: SimRobot) -> None:
+        self.robot = robot
+        self._connected = False
+
+    @property
+    def is_connected(self) -> bool:
+        return self._connected
+
+
+class SimCamera(_SimDevice, Camera):
+    """The head camera, rendered offscreen; opens its GL context on ``connect``."""
+
+    name = "sim camera"
+
+    def __init__(self, robot: SimRobot, model: CameraModel = PAPER_CAMERA) -> None:
+        super().__init__(robot)
+        fovy = float(robot.world.model.cam_fovy[robot.camera_id])
+        if abs(fovy - math.degrees(model.vfov)) > 0.01:
+            raise OutOfRangeError(self.name, f"render {model.width}x{model.height} at "
+                                  f"{math.degrees(model.hfov):.1f} deg hfov",
+                                  f"the MJCF camera has fovy {fovy:.3f} deg, not "
+                                  f"{math.degrees(model.vfov):.3f}",
+                                  "match the camera's fovy to CameraModel.vfov")
+        self._model = model
+        self._renderer: FrameRenderer | None = None
+
+    @property
+    def model(self) -> CameraModel:
+        return self._model
+
+    def connect(self) -> None:
+        if self._renderer is None:
+            self._renderer = FrameRenderer(self.robot.world.model, self._model.width,
+                                           self._model.height, CAMERA_NAME)
+        self._connected = True
+
+    def close(self) -> None:
+        if self._renderer is not None:
+            self._renderer.close()
+            self._renderer = None
+        self._connected = False
+
+    def grab(self) -> Frame:
+        self.require_connected("grab a frame")
+        assert self._renderer is not None
+        return Frame(self._renderer.render(self.robot.world.data), self.robot.world.time)
+
+
+class SimPanTilt(_SimDevice, PanTilt):
+    name = "sim pan-tilt"
+
+    def connect(self) -> None:
+        self._connected = True
+
+    def close(self) -> None:
+        if self._connected:
+            self.robot.stop_head()
+        self._connected = False
+
+    @property
+    def limits(self) -> PanTiltLimits:
+        return self.robot.head_limits
+
+    def move_to(self, pan: float, tilt: float = 0.0, *, speed: float | None = None,
+                timeout: float = 10.0) -> tuple[float, float]:
+        self.require_connected("move")
+        return self.robot.move_head(pan, tilt, speed, timeout)
+
+    def position(self) -> tuple[float, float]:
+        self.require_connected("read the position")
+        return self.robot.head()
+
+    def stop(self) -> None:
+        self.require_connected("stop")
+        self.robot.stop_head()
+
+
+class SimBase(_SimDevice, Base):
+    """The base; its ``pose()`` is wheel odometry, as on the real robot."""
+
+    name = "sim base"
+
+    def connect(self) -> None:
+        self._connected = True
+
+    def close(self) -> None:
+        if self._connected:
+            self.robot.set_wheel_speeds(0.0, 0.0)
+        self._connected = False
+
+    def pose(self) -> Pose2D:
+        self.require_connected("read the pose")
+        return self.robot.odometry_pose()
+
+    def set_pose(self, pose: Pose2D) -> None:
+        self.require_connected("set the pose")
+        self.robot.odometry.reset(pose, *self.robot._wheel_angles())
+
+    def go_to(self, goal: Pose2D, *, timeout: float = 60.0) -> Pose2D:
+        self.require_connected(f"go to {goal}")
+        return self.robot.go_to(goal, timeout)
+
+    def drive(self, speed: float, turn_rate: float, duration: float) -> Pose2D:
+        asked = f"drive {speed} m/s, {turn_rate} rad/s for {duration} s"
+        self.require_connected(asked)
+        lim = self.robot.drive_limits
+        if not (abs(speed) <= lim.speed and abs(turn_rate) <= lim.turn_rate
+                and 0.0 <= duration <= 600.0):
+            raise OutOfRangeError(self.name, asked, f"limits are |speed| <= {lim.speed} m/s, "
+                                  f"|turn rate| <= {lim.turn_rate:.2f} rad/s, 0..600 s",
+                                  "use smaller values")
+        return self.robot.drive(speed, turn_rate, duration)
+
+    def stop(self) -> None:
+        self.require_connected("stop")
+        self.robot.set_wheel_speeds(0.0, 0.0)
+
+
+def make_sim_robot(scene: str = DEFAULT_SCENE, start: Pose2D | None = None,
+                   camera: CameraModel = PAPER_CAMERA) -> tuple[SimRobot, Robot]:
+    """Load a scene, put the robot at ``start`` (default: the scene's), return both the
+    ``SimRobot`` (ground truth, world) and its devices as a ``twin.devices.Robot``."""
+    sim = SimRobot(World(scene), start)
+    return sim, sim.devices(camera)

@@ -1,0 +1,241 @@
+"""One MuJoCo world: a scene loaded from ``scenes/``, its clock, and its ground truth.
+
+The scene's world frame is the map frame (x right, y up, metres, origin at the room's lower-left
+corner, z up from the floor), so poses read here need no conversion. Furniture is every named,
+jointless body directly under the world that is not a target; targets are listed by the scene in
+its custom text ``twin_targets``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+import mujoco
+import numpy as np
+
+from twin.errors import InputError, TwinError
+from twin.geometry import Pose2D
+from twin.resources import scenes_dir
+
+DEFAULT_SCENE = "living_room"
+
+
+def scene_path(scene: str | Path) -> Path:
+    """Resolve a scene name (``living_room``) or an MJCF path to an existing file."""
+    text = str(scene)
+    is_path = text.endswith(".xml") or "/" in text
+    path = Path(text) if is_path else scenes_dir() / f"{text}.xml"
+    if not path.is_file():
+        known = ", ".join(sorted(p.stem for p in scenes_dir().glob("*.xml")))
+        raise InputError(f"scene {text!r}: no such file {path}; use one of: {known}, or a path")
+    return path
+
+
+def load_model(path: str | Path) -> mujoco.MjModel:
+    """Compile an MJCF file; a compile error becomes one line naming the file."""
+    try:
+        return mujoco.MjModel.from_xml_path(str(path))
+    except ValueError as exc:
+        first = str(exc).strip().splitlines()[0] if str(exc).strip() else "compile error"
+        raise TwinError(f"{path}: MuJoCo cannot compile it ({first}); fix the MJCF") from exc
+
+
+@dataclass(frozen=True)
+class Footprint:
+    """A body's outline on the floor: convex polygon (n, 2) in map metres, CCW, and top height."""
+
+    name: str
+    polygon: np.ndarray
+    top: float
+
+    @property
+    def aabb(self) -> tuple[float, float, float, float]:
+        """(xmin, ymin, xmax, ymax) in metres."""
+        lo, hi = self.polygon.min(axis=0), self.polygon.max(axis=0)
+        return float(lo[0]), float(lo[1]), float(hi[0]), float(hi[1])
+
+
+def _convex_hull(points: np.ndarray) -> np.ndarray:
+    """Andrew's monotone chain; returns the hull counter-clockwise without repeating a point."""
+    pts = sorted({(round(float(x), 6), round(float(y), 6)) for x, y in points})
+    if len(pts) <= 2:
+        return np.array(pts, dtype=float)
+
+    def cross(o: tuple[float, float], a: tuple[float, float], b: tuple[float, float]) -> float:
+        return (a[0] - o[0]) * (b[1] - o[1]) - (a[1] - o[1]) * (b[0] - o[0])
+
+    lower: list[tuple[float, float]] = []
+    upper: list[tuple[float, float]] = []
+    for p in pts:
+        while len(lower) >= 2 and cross(lower[-2], lower[-1], p) <= 0:
+            lower.pop()
+        lower.append(p)
+    for p in reversed(pts):
+        while len(upper) >= 2 and cross(upper[-2], upper[-1], p) <= 0:
+            upper.pop()
+        upper.append(p)
+    return np.array(lower[:-1] + upper[:-1], dtype=float)
+
+
+_CORNERS = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)], float)
+
+
+class World:
+    """A compiled scene with its state. Physics advances only through ``step``."""
+
+    def __init__(self, scene: str | Path = DEFAULT_SCENE) -> None:
+        self.path = scene_path(scene)
+        self.model = load_model(self.path)
+        self.data = mujoco.MjData(self.model)
+        mujoco.mj_forward(self.model, self.data)
+
+    # -- clock and stepping -------------------------------------------------------------------
+    @property
+    def time(self) -> float:
+        """Simulated seconds since the world was loaded."""
+        return float(self.data.time)
+
+    @property
+    def timestep(self) -> float:
+        return float(self.model.opt.timestep)
+
+    def step(self, n: int = 1) -> None:
+        mujoco.mj_step(self.model, self.data, nstep=n)
+
+    def forward(self) -> None:
+        mujoco.mj_forward(self.model, self.data)
+
+    def warnings(self) -> dict[str, int]:
+        """MuJoCo warnings raised so far (name -> count); empty when the physics is healthy."""
+        found = {}
+        for warning in mujoco.mjtWarning.__members__.values():
+            if warning.name == "mjNWARNING":
+                continue
+            count = int(self.data.warning[int(warning)].number)
+            if count:
+                found[warning.name] = count
+        return found
+
+    # -- names and ground truth -----------------------------------------------------------------
+    def body_id(self, name: str) -> int:
+        body = mujoco.mj_name2id(self.model, mujoco.mjtObj.mjOBJ_BODY, name)
+        if body < 0:
+            raise InputError(f"{self.path.name}: no body named {name!r}; known: "
+                             f"{', '.join(self.body_names())}")
+        return body
+
+    def body_names(self) -> list[str]:
+        names = (self.model.body(i).name for i in range(1, self.model.nbody))
+        return [name for name in names if name]
+
+    def body_position(self, name: str) -> np.ndarray:
+        """World position (3,) of a body's frame, metres (ground truth)."""
+        return self.data.xpos[self.body_id(name)].copy()
+
+    def body_pose(self, name: str) -> Pose2D:
+        """Planar pose of a body's frame: x, y in metres, yaw of its +x axis in radians."""
+        body = self.body_id(name)
+        xmat = self.data.xmat[body].reshape(3, 3)
+        x, y, _ = self.data.xpos[body]
+        return Pose2D(float(x), float(y), math.atan2(xmat[1, 0], xmat[0, 0]))
+
+    def _custom_text(self, name: str) -> str | None:
+        idx = mujoco.mj_name2id(self.model, mujoco.mjtObj.mjOBJ_TEXT, name)
+        return None if idx < 0 else self.model.text(idx).data
+
+    def _custom_numeric(self, name: str) -> np.ndarray | None:
+        idx = mujoco.mj_name2id(self.model, mujoco.mjtObj.mjOBJ_NUMERIC, name)
+        return None if idx < 0 else np.array(self.model.numeric(idx).data, dtype=float)
+
+    def targets(self) -> tuple[str, ...]:
+        """Names of the bodies the scene declares as targets (custom text ``twin_targets``)."""
+        text = self._custom_text("twin_targets") or ""
+        return tuple(text.replace(",", " ").split())
+
+    def robot_start(self) -> Pose2D | None:
+        """The scene's suggested robot start (custom numeric ``twin_robot_start``), or None."""
+        values = self._custom_numeric("twin_robot_start")
+        return None if values is None or values.size != 3 else Pose2D(*map(float, values))
+
+    def room_bounds(self) -> tuple[float, float, float, float]:
+        """(xmin, ymin, xmax, ymax) of the floor geom named ``floor``, metres."""
+        geom = mujoco.mj_name2id(self.model, mujoco.mjtObj.mjOBJ_GEOM, "floor")
+        if geom < 0:
+            raise InputError(f"{self.path.name}: has no geom named 'floor' to bound the room")
+        cx, cy, _ = self.model.geom_pos[geom]
+        sx, sy, _ = self.model.geom_size[geom]
+        return float(cx - sx), float(cy - sy), float(cx + sx), float(cy + sy)
+
+    def furniture(self) -> list[str]:
+        """Static bodies under the world that are not targets: what the robot must drive round."""
+        targets = set(self.targets())
+        names = []
+        for body in range(1, self.model.nbody):
+            name = self.model.body(body).name
+            if (
+                name
+                and self.model.body_parentid[body] == 0
+                and self.model.body_weldid[body] == 0
+                and name not in targets
+            ):
+                names.append(name)
+        return names
+
+    def footprint(self, name: str) -> Footprint:
+        """Convex outline on the floor of every geom of a body and its descendants (metres)."""
+        root = self.body_id(name)
+        corners = []
+        top = 0.0
+        for geom in range(self.model.ngeom):
+            body = int(self.model.geom_bodyid[geom])
+            while body not in (0, root):
+                body = int(self.model.body_parentid[body])
+            if body != root:
+                continue
+            centre, half = self.model.geom_aabb[geom, :3], self.model.geom_aabb[geom, 3:]
+            local = centre + _CORNERS * half
+            world = self.data.geom_xpos[geom] + local @ self.data.geom_xmat[geom].reshape(3, 3).T
+            corners.append(world)
+            top = max(top, float(world[:, 2].max()))
+        if not corners:
+            raise InputError(f"{self.path.name}: body {name!r} has no geoms, so no footprint")
+        return Footprint(name, _convex_hull(np.concatenate(corners)[:, :2]), top)
+
+    def footprints(self) -> dict[str, Footprint]:
+        """Footprints of all furniture and targets, by body name (for drawing grid maps)."""
+        return {name: self.footprint(name) for name in (*self.furniture(), *self.targets())}
+
+    # -- placing static objects -----------------------------------------------------------------
+    def surface_height(self, x: float, y: float, exclude: str | None = None) -> float:
+        """Height (m) of the first collidable surface below (x, y), cast down from 3 m."""
+        geomid = np.zeros(1, dtype=np.int32)
+        body_exclude = -1 if exclude is None else self.body_id(exclude)
+        groups = np.array([1, 0, 0, 0, 0, 0], dtype=np.uint8)  # group 0: collidable things
+        dist = mujoco.mj_ray(self.model, self.data, np.array([x, y, 3.0]), np.array([0, 0, -1.0]),
+                             groups, True, body_exclude, geomid)
+        return 0.0 if dist < 0 else 3.0 - float(dist)
+
+    def place_static_body(self, name: str, x: float, y: float, yaw: float) -> Pose2D:
+        """Move a jointless body (e.g. a target) to stand on whatever surface is below (x, y).
+
+        This edits the model, so it is meant for setting a scene up before a run, not for moving
+        things during one. Returns the body's new planar pose.
+        """
+        body = self.body_id(name)
+        if self.model.body_weldid[body] != 0 or self.model.body_parentid[body] != 0:
+            raise InputError(f"{name!r} is not a static body under the world; it cannot be placed")
+        xmin, ymin, xmax, ymax = self.room_bounds()
+        if not (xmin <= x <= xmax and ymin <= y <= ymax):
+            raise InputError(f"cannot place {name!r} at ({x:.2f}, {y:.2f}) m: outside the room "
+                             f"[{xmin}, {xmax}] x [{ymin}, {ymax}]")
+        # lowest point of the body's geoms below its frame (geoms assumed upright in it)
+        aabb, pos = self.model.geom_aabb, self.model.geom_pos
+        bottom = min(float(pos[g, 2] + aabb[g, 2] - aabb[g, 5])
+                     for g in range(self.model.ngeom) if self.model.geom_bodyid[g] == body)
+        z = self.surface_height(x, y, exclude=name) - bottom
+        self.model.body_pos[body] = (x, y, z)
+        self.model.body_quat[body] = (math.cos(yaw / 2), 0.0, 0.0, math.sin(yaw / 2))
+        self.forward()
+        return self.body_pose(name)
