@@ -1,0 +1,298 @@
+"""``twin train``, ``twin detect`` and ``twin roc``: the RFCH detector from the command line.
+
+File conventions:
+- Images: ``.png .jpg .jpeg .bmp .tif .tiff`` files, 8-bit colour, read in name order.
+- Masks (``--masks DIR``): for image ``NAME.ext`` the mask is ``DIR/NAME.png``, 8-bit, any
+  nonzero pixel is the object (a colour mask counts a pixel nonzero in any channel). For
+  ``twin roc`` an all-zero mask is allowed and means "the object is not in this frame".
+- Without ``--masks``, ``twin train`` takes the object from each image's alpha channel
+  (a cut-out PNG: alpha > 0 is the object).
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+from typing import Any
+
+from twin.commands._args import comma_list
+from twin.errors import InputError
+
+IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff")
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    train = subparsers.add_parser(
+        "train",
+        help="train an RFCH model of one object from images with masks",
+        description="Train an RFCH model (codebook + cooccurrence histogram) of one object. "
+        + __doc__.split("File conventions:")[1].replace("\n-", "\n *"),
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    train.add_argument("--name", required=True, help="object name stored in the model")
+    train.add_argument("--images", required=True, type=Path, help="directory of training views")
+    train.add_argument("--masks", type=Path, help="directory of masks NAME.png (nonzero = object)")
+    train.add_argument("--out", required=True, type=Path, help="model file to write (.npz)")
+    train.add_argument("--clusters", type=int, default=80, help="k-means centres N (80)")
+    train.add_argument("--alpha", type=float, default=1.5, help="rejection factor α (1.5)")
+    train.add_argument("--d-max", type=float, default=10.0, help="pair distance, px (10)")
+    train.add_argument(
+        "--sigmas",
+        type=comma_list(float, "Gaussian scales in px"),
+        default=(2.0, 4.0),
+        help="Gaussian scales, px (2,4)",
+    )
+    train.add_argument("--colour-weight", type=float, default=1.0, help="weight of r, g (1)")
+    train.add_argument("--sample-step", type=int, default=2, help="label every n-th px (2)")
+    train.add_argument("--patch-size", type=int, default=32, help="patch side, px (32)")
+    train.add_argument("--stride", type=int, default=16, help="patch stride, px (16)")
+    train.add_argument(
+        "--views",
+        choices=("merged", "per_view"),
+        default="merged",
+        help="one histogram over all views, or one per view (merged)",
+    )
+    train.add_argument("--seed", type=int, default=0, help="k-means seed (0)")
+    train.set_defaults(handler=_train)
+
+    detect = subparsers.add_parser(
+        "detect",
+        help="score every patch of an image and draw the heat-map and column profile",
+        description="Score every patch of IMAGE for each model; write a PNG with the score "
+        "heat-map over the frame and the per-column maximum below, one pair of panels per model.",
+    )
+    detect.add_argument("--model", required=True, action="append", type=Path, help="model file")
+    detect.add_argument("image", type=Path, help="image file (8-bit colour)")
+    detect.add_argument("--out", required=True, type=Path, help="PNG to write")
+    detect.set_defaults(handler=_detect)
+
+    roc = subparsers.add_parser(
+        "roc",
+        help="ROC curve of a model on labelled frames, and the threshold to give the grid",
+        description="Score labelled frames and write the per-column ROC (PNG and CSV). A column "
+        "is positive when one of its patches has at least --min-cover of its area on the mask, "
+        "negative when none of its pixels is, and left out otherwise; its score is the maximum "
+        "over its patches. Prints AUC, the chosen threshold and its (P_fp, P_fn).",
+    )
+    roc.add_argument("--model", required=True, type=Path, help="model file")
+    roc.add_argument("--images", required=True, type=Path, help="directory of frames")
+    roc.add_argument("--masks", required=True, type=Path, help="directory of masks NAME.png")
+    roc.add_argument("--out", required=True, type=Path, help="ROC plot to write (.png)")
+    roc.add_argument("--csv", type=Path, help="ROC table to write (default: --out with .csv)")
+    roc.add_argument("--min-cover", type=float, default=0.25, help="positive patch cover (0.25)")
+    roc.add_argument(
+        "--max-fp",
+        type=float,
+        help="choose the least P_fn with P_fp at most this (default: least P_fp + P_fn)",
+    )
+    roc.set_defaults(handler=_roc)
+
+
+# ---------------------------------------------------------------------------- file reading
+
+
+def list_images(directory: Path) -> list[Path]:
+    if not directory.is_dir():
+        raise InputError(f"{directory}: no such directory; give a directory of images")
+    files = sorted(p for p in directory.iterdir() if p.suffix.lower() in IMAGE_SUFFIXES)
+    if not files:
+        raise InputError(f"{directory}: holds no image ({', '.join(IMAGE_SUFFIXES)})")
+    return files
+
+
+def read_image(path: Path, keep_alpha: bool = False) -> Any:
+    """H×W×3 uint8 RGB (H×W×4 RGBA with ``keep_alpha`` if the file has alpha)."""
+    import cv2
+    import numpy as np
+
+    if not path.is_file():
+        raise InputError(f"{path}: no such image file; check the path")
+    data = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
+    if data is None:
+        raise InputError(f"{path}: not a readable image; give a PNG or JPEG file")
+    if data.dtype != np.uint8:
+        raise InputError(f"{path}: is {data.dtype} per channel; RFCH needs an 8-bit image")
+    if data.ndim == 2 or data.shape[2] == 1:
+        raise InputError(f"{path}: is a grey image; RFCH needs colour (normalized r, g)")
+    if data.shape[2] == 4:
+        rgba = cv2.cvtColor(data, cv2.COLOR_BGRA2RGBA)
+        return rgba if keep_alpha else np.ascontiguousarray(rgba[..., :3])
+    if keep_alpha:
+        raise InputError(
+            f"{path}: has no alpha channel; give --masks DIR or cut-out PNGs with alpha"
+        )
+    return cv2.cvtColor(data, cv2.COLOR_BGR2RGB)
+
+
+def read_mask(image_path: Path, masks: Path, shape: tuple[int, ...]) -> Any:
+    """Bool mask ``masks/<stem>.png`` of ``image_path`` (nonzero = object)."""
+    import cv2
+
+    path = masks / f"{image_path.stem}.png"
+    if not path.is_file():
+        raise InputError(
+            f"{path}: no mask for {image_path.name}; masks are NAME.png, nonzero = object"
+        )
+    data = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
+    if data is None:
+        raise InputError(f"{path}: not a readable PNG mask")
+    mask = data != 0 if data.ndim == 2 else (data != 0).any(axis=2)
+    if mask.shape != tuple(shape[:2]):
+        raise InputError(
+            f"{path}: mask is {mask.shape[0]}×{mask.shape[1]} but {image_path.name} is "
+            f"{shape[0]}×{shape[1]}; masks must match their images"
+        )
+    return mask
+
+
+# ---------------------------------------------------------------------------- handlers
+
+
+def _train(args: argparse.Namespace) -> int:
+    from twin.rfch import RFCH
+
+    images, masks = [], []
+    for path in list_images(args.images):
+        if args.masks is None:
+            rgba = read_image(path, keep_alpha=True)
+            images.append(rgba[..., :3].copy())
+            masks.append(rgba[..., 3] > 0)
+        else:
+            image = read_image(path)
+            images.append(image)
+            masks.append(read_mask(path, args.masks, image.shape))
+    model = RFCH.train(
+        args.name,
+        images,
+        masks,
+        n_clusters=args.clusters,
+        alpha=args.alpha,
+        d_max=args.d_max,
+        sigmas=args.sigmas,
+        colour_weight=args.colour_weight,
+        sample_step=args.sample_step,
+        patch_size=args.patch_size,
+        stride=args.stride,
+        views=args.views,
+        seed=args.seed,
+    )
+    model.save(args.out)
+    summary = model.summary
+    print(
+        f"{args.out}: {model.name!r} from {summary['views']} view(s), "
+        f"{summary['object_pixels']} object px, {summary['clusters']} clusters"
+    )
+    return 0
+
+
+def _detect(args: argparse.Namespace) -> int:
+    from twin.rfch import RFCH, Detector
+
+    detector = Detector([RFCH.load(path) for path in args.model])
+    image = read_image(args.image)
+    scores = detector.scores(image)
+    spans = detector.column_spans(image.shape[1])
+    for name, layer in zip(detector.names, scores, strict=True):
+        profile = layer.max(axis=0)
+        best = int(profile.argmax())
+        print(
+            f"{name}: best column {best} (px {spans[best, 0]:.0f}–{spans[best, 1]:.0f}), "
+            f"score {profile[best]:.3f}"
+        )
+    _draw_detection(args.out, image, detector, scores)
+    print(f"wrote {args.out}")
+    return 0
+
+
+def _draw_detection(out: Path, image: Any, detector: Any, scores: Any) -> None:
+    import io
+
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import numpy as np
+
+    from twin.store import write_atomic
+
+    boxes = detector.patch_boxes(image.shape)
+    spans = detector.column_spans(image.shape[1])
+    n = len(scores)
+    fig, axes = plt.subplots(
+        2 * n, 1, figsize=(6, 6.2 * n), gridspec_kw={"height_ratios": [3, 1] * n}, squeeze=False
+    )
+    for index, (name, layer) in enumerate(zip(detector.names, scores, strict=True)):
+        # Each pixel shows the best patch that covers it (patches overlap when stride < size).
+        heat = np.zeros(image.shape[:2], dtype=np.float32)
+        for (x0, y0, x1, y1), value in zip(boxes.reshape(-1, 4), layer.ravel(), strict=True):
+            np.maximum(heat[y0:y1, x0:x1], value, out=heat[y0:y1, x0:x1])
+        top, bottom = axes[2 * index, 0], axes[2 * index + 1, 0]
+        top.imshow(image)
+        shown = top.imshow(heat, cmap="inferno", alpha=0.55, vmin=0.0, vmax=1.0)
+        top.set_title(f"{name}: RFCH match per patch")
+        top.set_axis_off()
+        fig.colorbar(shown, ax=top, fraction=0.03, pad=0.01)
+        profile = layer.max(axis=0)
+        centres = spans.mean(axis=1)
+        bottom.bar(centres, profile, width=detector.grid.stride * 0.9, color="tab:orange")
+        bottom.set_xlim(0, image.shape[1])
+        bottom.set_ylim(0, 1)
+        bottom.set_xlabel("image column (px)")
+        bottom.set_ylabel("max over rows")
+    fig.tight_layout()
+    buffer = io.BytesIO()
+    fig.savefig(buffer, format="png", dpi=100)
+    plt.close(fig)
+    write_atomic(out, lambda handle: handle.write(buffer.getvalue()))
+
+
+def _roc(args: argparse.Namespace) -> int:
+    import io
+
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import numpy as np
+
+    from twin.rfch import RFCH
+    from twin.rfch.roc import column_truth, roc_curve
+    from twin.store import write_atomic, write_text_atomic
+
+    if args.max_fp is not None and not 0.0 <= args.max_fp <= 1.0:
+        raise InputError(f"--max-fp must be in [0, 1], got {args.max_fp}")
+    model = RFCH.load(args.model)
+    all_scores, all_truth = [], []
+    for path in list_images(args.images):
+        image = read_image(path)
+        mask = read_mask(path, args.masks, image.shape)
+        all_scores.append(model.scores(image).max(axis=0))
+        all_truth.append(column_truth(mask, model.params.grid, args.min_cover))
+    roc = roc_curve(np.concatenate(all_scores), np.concatenate(all_truth))
+    threshold, p_fp, p_fn = roc.choose(args.max_fp)
+    csv_path = args.csv or args.out.with_suffix(".csv")
+    rows = ["threshold,p_fp,p_fn"] + [
+        f"{t:.6g},{fp:.6f},{fn:.6f}"
+        for t, fp, fn in zip(roc.thresholds, roc.p_fp, roc.p_fn, strict=True)
+    ]
+    write_text_atomic(csv_path, "\n".join(rows) + "\n")
+
+    fig, ax = plt.subplots(figsize=(4.5, 4.5))
+    ax.plot(roc.p_fp, 1.0 - roc.p_fn, drawstyle="steps-post", label=f"AUC {roc.auc:.3f}")
+    ax.plot([p_fp], [1.0 - p_fn], "o", label=f"threshold {threshold:.3f}")
+    ax.plot([0, 1], [0, 1], ":", color="grey")
+    ax.set_xlabel("P_fp (false positive rate)")
+    ax.set_ylabel("1 − P_fn (true positive rate)")
+    ax.set_title(f"{model.name}: {roc.positives} positive, {roc.negatives} negative columns")
+    ax.legend(loc="lower right")
+    fig.tight_layout()
+    buffer = io.BytesIO()
+    fig.savefig(buffer, format="png", dpi=100)
+    plt.close(fig)
+    write_atomic(args.out, lambda handle: handle.write(buffer.getvalue()))
+    print(
+        f"AUC {roc.auc:.3f} over {roc.positives} positive and {roc.negatives} negative columns; "
+        f"threshold {threshold:.4f} gives P_fp {p_fp:.3f}, P_fn {p_fn:.3f}"
+    )
+    print(f"wrote {args.out} and {csv_path}")
+    return 0
