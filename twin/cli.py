@@ -16,7 +16,11 @@ from twin.errors import TwinError
 
 # Each module defines ``register(subparsers)``; heavy imports happen inside the handlers so
 # that ``twin --help`` stays fast.
-COMMAND_MODULES: tuple[str, ...] = ("twin.commands.montecarlo", "twin.commands.rfch")
+COMMAND_MODULES: tuple[str, ...] = (
+    "twin.commands.montecarlo",
+    "twin.commands.rfch",
+    "twin.commands.sim",
+)
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -79,6 +79,16 @@ def _convex_hull(points: np.ndarray) -> np.ndarray:
     return np.array(lower[:-1] + upper[:-1], dtype=float)
 
 
+def _distance_to_polygon(point: np.ndarray, polygon: np.ndarray) -> float:
+    """Distance (m) from a point to a convex CCW polygon; negative inside."""
+    a, b = polygon, np.roll(polygon, -1, axis=0)
+    edge, rel = b - a, point - a
+    t = np.clip(np.einsum("ij,ij->i", rel, edge) / np.einsum("ij,ij->i", edge, edge), 0.0, 1.0)
+    dist = float(np.min(np.linalg.norm(rel - t[:, None] * edge, axis=1)))
+    inside = bool(np.all(edge[:, 0] * rel[:, 1] - edge[:, 1] * rel[:, 0] >= 0.0))
+    return -dist if inside else dist
+
+
 _CORNERS = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)], float)
 
 
@@ -143,11 +153,17 @@ class World:
 
     def _custom_text(self, name: str) -> str | None:
         idx = mujoco.mj_name2id(self.model, mujoco.mjtObj.mjOBJ_TEXT, name)
-        return None if idx < 0 else self.model.text(idx).data
+        if idx < 0:
+            return None
+        start, size = int(self.model.text_adr[idx]), int(self.model.text_size[idx])
+        return bytes(self.model.text_data[start:start + size]).rstrip(b"\0").decode("utf-8")
 
     def _custom_numeric(self, name: str) -> np.ndarray | None:
         idx = mujoco.mj_name2id(self.model, mujoco.mjtObj.mjOBJ_NUMERIC, name)
-        return None if idx < 0 else np.array(self.model.numeric(idx).data, dtype=float)
+        if idx < 0:
+            return None
+        start, size = int(self.model.numeric_adr[idx]), int(self.model.numeric_size[idx])
+        return np.array(self.model.numeric_data[start:start + size], dtype=float)
 
     def targets(self) -> tuple[str, ...]:
         """Names of the bodies the scene declares as targets (custom text ``twin_targets``)."""
@@ -206,6 +222,21 @@ class World:
     def footprints(self) -> dict[str, Footprint]:
         """Footprints of all furniture and targets, by body name (for drawing grid maps)."""
         return {name: self.footprint(name) for name in (*self.furniture(), *self.targets())}
+
+    def check_free(self, x: float, y: float, clearance: float, what: str) -> None:
+        """Raise ``InputError`` unless (x, y) is in the room and ``clearance`` metres from every
+        wall and piece of furniture (e.g. the robot's radius, for a pose it should stand at)."""
+        xmin, ymin, xmax, ymax = self.room_bounds()
+        if not (xmin + clearance <= x <= xmax - clearance
+                and ymin + clearance <= y <= ymax - clearance):
+            raise InputError(f"{what} ({x:.2f}, {y:.2f}) m is not {clearance:.2f} m inside the "
+                             f"room [{xmin:g}, {xmax:g}] x [{ymin:g}, {ymax:g}]; choose another")
+        for name in self.furniture():
+            gap = _distance_to_polygon(np.array([x, y]), self.footprint(name).polygon)
+            if gap < clearance:
+                where = f"inside the {name}" if gap <= 0 else f"{gap:.2f} m from the {name}"
+                raise InputError(f"{what} ({x:.2f}, {y:.2f}) m is {where}, closer than "
+                                 f"{clearance:.2f} m; choose another")
 
     # -- placing static objects -----------------------------------------------------------------
     def surface_height(self, x: float, y: float, exclude: str | None = None) -> float:
