@@ -99,9 +99,9 @@ def test_intersection_of_identical_histograms_is_one_and_of_disjoint_ones_zero()
 def test_colour_table_never_rejects_an_accepted_pixel(model: RFCH) -> None:
     frame, _ = scene(5)
     desc = model.params  # labelling with and without the colour shortcut must agree
-    from twin.rfch.descriptor import raw_descriptors, sample
+    from twin.rfch.descriptor import raw_descriptors
 
-    sampled = sample(raw_descriptors(frame, desc), model.params.sample_step)
+    sampled = raw_descriptors(frame, desc, model.params.sample_step)
     everything = np.ones((1, 1), dtype=bool)
     full = kernels.label_samples(
         sampled, model.offset, model.scale, model.centres, model.radius**2, True, everything

@@ -17,7 +17,7 @@ import numpy as np
 
 from twin.errors import InputError
 from twin.rfch import kernels
-from twin.rfch.descriptor import check_image, raw_descriptors, sample, sample_bounds
+from twin.rfch.descriptor import check_image, raw_descriptors, sample_bounds
 from twin.rfch.model import RFCH
 from twin.rfch.params import PatchGrid
 
@@ -40,7 +40,7 @@ class Detector:
                 + "; re-train them with equal --patch-size and --stride"
             )
         self.grid: PatchGrid = grids.pop()
-        self._offsets = {
+        self._widths = {
             (m.params.d_max, m.params.sample_step): kernels.half_widths(
                 m.params.d_max, m.params.sample_step
             )
@@ -76,28 +76,25 @@ class Detector:
         rows_px = self.grid.starts(image.shape[0])
         cols_px = self.grid.starts(image.shape[1])
         t1 = clock()
+        # One descriptor pass per distinct (descriptor setting, sample step): normally one.
         descriptors: dict[tuple, np.ndarray] = {}
-        sampled: dict[tuple, np.ndarray] = {}
-        elapsed_desc = t1 - t1
+        elapsed_desc = 0.0
         elapsed_label = 0.0
         elapsed_pairs = 0.0
         out = np.empty((len(self.models), len(rows_px), len(cols_px)), dtype=np.float32)
         for index, model in enumerate(self.models):
             params = model.params
-            key = params.descriptor_key
+            key = (params.descriptor_key, params.sample_step)
             t = clock()
             if key not in descriptors:
-                descriptors[key] = raw_descriptors(image, params)
-            sample_key = (key, params.sample_step)
-            if sample_key not in sampled:
-                sampled[sample_key] = sample(descriptors[key], params.sample_step)
+                descriptors[key] = raw_descriptors(image, params, params.sample_step)
             t_desc = clock()
-            labels = model.label(sampled[sample_key])
+            labels = model.label(descriptors[key])
             t_label = clock()
             step = params.sample_step
             out[index] = kernels.patch_scores(
                 labels,
-                self._offsets[(params.d_max, step)],
+                self._widths[(params.d_max, step)],
                 sample_bounds(rows_px, self.grid.size, step),
                 sample_bounds(cols_px, self.grid.size, step),
                 self._flat[index],

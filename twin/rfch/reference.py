@@ -17,7 +17,7 @@ from twin.rfch.model import RFCH
 def reference_labels(model: RFCH, image: np.ndarray) -> np.ndarray:
     """(h, w) labels of the sampled pixels: nearest centre, -1 beyond α × mean distance."""
     params = model.params
-    desc = raw_descriptors(check_image(image), params)[:: params.sample_step, :: params.sample_step]
+    desc = raw_descriptors(check_image(image), params, params.sample_step)
     z = (desc.astype(np.float64) - model.offset) * model.scale
     d2 = ((z[:, :, None, :] - model.centres.astype(np.float64)) ** 2).sum(axis=3)
     labels = np.argmin(d2, axis=2)
