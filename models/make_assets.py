@@ -156,15 +156,16 @@ def bookcase_xml(rng: np.random.Generator) -> str:
     return "\n".join(lines) + "\n"
 
 
-def main() -> None:
+def main(out: Path = HERE) -> None:
+    """Write every asset under ``out`` (default: beside this script, where they are committed)."""
     rng = np.random.default_rng(SEED)
-    tex = HERE / "textures"
+    tex = out / "textures"
     _write_png(tex / "rice_box.png", rice_box())
     _write_png(tex / "floor.png", floor(rng))
     _write_png(tex / "wall.png", noise(rng, (232, 226, 212), 4.0))
     _write_png(tex / "fabric.png", noise(rng, (70, 95, 125), 14.0, blur=0.6))
     _write_png(tex / "wood_dark.png", wood_dark(rng))
-    (HERE / "bookcase_contents.xml").write_text(bookcase_xml(rng))
+    (out / "bookcase_contents.xml").write_text(bookcase_xml(rng))
 
 
 if __name__ == "__main__":

@@ -36,6 +36,9 @@ CAMERA_NAME = "head_camera"
 PAPER_CAMERA = CameraModel()  # 320x240, 45 degrees horizontal: the paper's camera
 GENTLE = DriveLimits()
 HEAD_TOLERANCE = math.radians(0.2)  # a pan-tilt move is over when the joint is this close
+# Driving needs under 1 N m per wheel; pushing against furniture takes the friction limit (~5).
+STALL_TORQUE = 3.0  # N m
+STALL_TIME = 0.5  # s
 
 
 def _id(model: mujoco.MjModel, kind: mujoco.mjtObj, name: str) -> int:
@@ -69,6 +72,8 @@ class SimRobot:
                            for n in ("pan", "tilt")]
         self._head_act = [_id(m, mujoco.mjtObj.mjOBJ_ACTUATOR, n) for n in ("pan", "tilt")]
         self._head_actadr = [int(m.actuator_actadr[a]) for a in self._head_act]
+        self._head_qvel = [int(m.jnt_dofadr[_id(m, mujoco.mjtObj.mjOBJ_JOINT, n)])
+                           for n in ("pan", "tilt")]
         self.camera_id = _id(m, mujoco.mjtObj.mjOBJ_CAMERA, CAMERA_NAME)
         # geometry read from the model, so odometry and the MJCF cannot disagree
         wheel_geom = _id(m, mujoco.mjtObj.mjOBJ_GEOM, "left_wheel")
@@ -85,6 +90,8 @@ class SimRobot:
         self._head_goal = [0.0, 0.0]
         self._head_speed = [self.head_limits.pan_speed, self.head_limits.tilt_speed]
         self._wheels = (0.0, 0.0)
+        # called after every physics step (recorders, wire-protocol emulators, tests)
+        self.listeners: list[Callable[[SimRobot], None]] = []
         self.odometry = Odometry(self.geometry, Pose2D(0.0, 0.0, 0.0), 0.0, 0.0)
         self.place(start or world.robot_start() or Pose2D(0.0, 0.0, 0.0))
 
@@ -108,6 +115,11 @@ class SimRobot:
         """Current (pan, tilt) joint angles, radians."""
         q = self.world.data.qpos
         return float(q[self._head_qpos[0]]), float(q[self._head_qpos[1]])
+
+    def head_rates(self) -> tuple[float, float]:
+        """Current (pan, tilt) joint speeds, rad/s."""
+        v = self.world.data.qvel
+        return float(v[self._head_qvel[0]]), float(v[self._head_qvel[1]])
 
     def camera_position(self) -> np.ndarray:
         """Ground-truth optical centre (3,), metres."""
@@ -149,6 +161,8 @@ class SimRobot:
         self._apply_controls()
         self.world.step()
         self.odometry.update(*self._wheel_angles())
+        for listener in self.listeners:
+            listener(self)
 
     def advance(self, seconds: float) -> None:
         """Let simulated time pass with the current commands."""
@@ -185,30 +199,37 @@ class SimRobot:
                     f"odometry {self.odometry_pose()}", "check that the path is free of furniture")
             self.set_wheel_speeds(*controller.command(self.odometry_pose(), dt))
             self.step()
-            stalled_since = self._stall_check(stalled_since, goal)
+            stalled_since = self._stall_check(stalled_since, f"go to {goal}")
         self.set_wheel_speeds(0.0, 0.0)
         self.advance(0.2)  # let the servos bring the wheels to rest
         return self.odometry_pose()
 
-    def _stall_check(self, since: float | None, goal: Pose2D) -> float | None:
-        """Raise if the wheels are commanded but the base has not moved for a second."""
-        d = self.world.data
-        commanded = max(abs(self._wheels[0]), abs(self._wheels[1])) > 1.0
-        moving = float(np.linalg.norm(d.qvel[self._free_qvel:self._free_qvel + 6])) > 0.02
-        if not commanded or moving:
+    def _stall_check(self, since: float | None, asked: str) -> float | None:
+        """Raise if a wheel motor has strained for ``STALL_TIME``: the base pushes on something.
+
+        Like the Pioneer's stall flag (motor current), not like a position check: the wheels
+        slip against an obstacle, so odometry alone would think the base is moving.
+        """
+        torque = np.abs(self.world.data.actuator_force[self._wheel_act])
+        if torque.max() < STALL_TORQUE:
             return None
         if since is None:
             return self.world.time
-        if self.world.time - since > 1.0:
+        if self.world.time - since > STALL_TIME:
             self.set_wheel_speeds(0.0, 0.0)
-            raise DeviceFaultError("sim base", f"go to {goal}", "the wheels turn but the base "
-                                   f"does not move (stalled at {self.truth_pose()})",
-                                   "the path is blocked; choose another stop")
+            raise DeviceFaultError("sim base", asked, "wheel motors stalled: the path "
+                                   f"is blocked at {self.truth_pose()}",
+                                   "choose a stop with a free straight path to it")
         return since
 
     def drive(self, speed: float, turn_rate: float, duration: float) -> Pose2D:
+        """Hold body speed (m/s) and turn rate (rad/s) for ``duration`` seconds, then stop."""
         self.set_wheel_speeds(speed, turn_rate)
-        self.advance(duration)
+        stalled_since = None
+        asked = f"drive {speed:.2f} m/s, {turn_rate:.2f} rad/s for {duration:g} s"
+        for _ in range(max(0, round(duration / self.world.timestep))):
+            self.step()
+            stalled_since = self._stall_check(stalled_since, asked)
         self.set_wheel_speeds(0.0, 0.0)
         self.advance(0.2)
         return self.odometry_pose()
@@ -220,12 +241,10 @@ class SimRobot:
         self._head_goal = [pan, tilt]
         self._head_speed = [min(speed or math.inf, self.head_limits.pan_speed),
                             min(speed or math.inf, self.head_limits.tilt_speed)]
-        qvel_adr = [int(self.world.model.jnt_dofadr[self.world.model.actuator_trnid[a, 0]])
-                    for a in self._head_act]
 
         def there() -> bool:
             at = self.head()
-            still = max(abs(self.world.data.qvel[i]) for i in qvel_adr) < math.radians(1.0)
+            still = max(map(abs, self.head_rates())) < math.radians(1.0)
             return still and all(abs(a - g) < HEAD_TOLERANCE
                                  for a, g in zip(at, self._head_goal, strict=True))
 
