@@ -238,6 +238,15 @@ class World:
                 raise InputError(f"{what} ({x:.2f}, {y:.2f}) m is {where}, closer than "
                                  f"{clearance:.2f} m; choose another")
 
+    def path_clearance(self, start: tuple[float, float], end: tuple[float, float]) -> float:
+        """Smallest distance (m) from the straight segment start-end to any furniture (negative
+        if it passes through one): a straight drive needs more than the robot's half-width."""
+        length = math.dist(start, end)
+        points = np.linspace(start, end, max(2, int(length / 0.02) + 1))
+        polygons = [self.footprint(name).polygon for name in self.furniture()]
+        return min(_distance_to_polygon(point, polygon)
+                   for polygon in polygons for point in points)
+
     # -- placing static objects -----------------------------------------------------------------
     def surface_height(self, x: float, y: float, exclude: str | None = None) -> float:
         """Height (m) of the first collidable surface below (x, y), cast down from 3 m."""
