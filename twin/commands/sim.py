@@ -12,8 +12,6 @@ import time
 from twin.errors import InputError
 from twin.geometry import Pose2D
 
-ROBOT_CLEARANCE = 0.3  # m: the base's half-diagonal, so a pose never starts inside furniture
-
 
 def parse_pose(text: str, flag: str) -> Pose2D:
     """'X,Y,YAW_DEG' -> Pose2D (metres, radians)."""
@@ -49,7 +47,7 @@ def _snapshot(args: argparse.Namespace) -> int:
     pose = parse_pose(args.pose, "--pose")
     pan, tilt = _degrees(args.pan, "--pan"), _degrees(args.tilt, "--tilt")
     from twin.sim.render import write_png
-    from twin.sim.robot import SimRobot
+    from twin.sim.robot import ROBOT_CLEARANCE, SimRobot
     from twin.sim.world import World
 
     world = World(args.scene)
@@ -67,7 +65,7 @@ def _snapshot(args: argparse.Namespace) -> int:
 def _drive(args: argparse.Namespace) -> int:
     goal = parse_pose(args.to, "--to")
     start = None if args.start is None else parse_pose(args.start, "--from")
-    from twin.sim.robot import SimBase, SimRobot
+    from twin.sim.robot import ROBOT_CLEARANCE, SimBase, SimRobot
     from twin.sim.world import World
 
     world = World(args.scene)

@@ -33,6 +33,7 @@ from twin.sim.render import FrameRenderer
 from twin.sim.world import DEFAULT_SCENE, World
 
 CAMERA_NAME = "head_camera"
+ROBOT_CLEARANCE = 0.3  # m: the base's half-diagonal; a pose this far from furniture is free
 PAPER_CAMERA = CameraModel()  # 320x240, 45 degrees horizontal: the paper's camera
 GENTLE = DriveLimits()
 HEAD_TOLERANCE = math.radians(0.2)  # a pan-tilt move is over when the joint is this close

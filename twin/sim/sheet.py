@@ -15,7 +15,7 @@ import numpy as np
 
 from twin.geometry import Pose2D
 from twin.sim.render import write_png
-from twin.sim.robot import SimRobot
+from twin.sim.robot import ROBOT_CLEARANCE, SimRobot
 from twin.sim.world import DEFAULT_SCENE, World
 
 # Five stops spread over the living room, clear of the furniture (x, y in metres).
@@ -61,5 +61,8 @@ def contact_sheet(rows: list[list[tuple[Pose2D, np.ndarray]]], scale: float = 1.
 def make_contact_sheet(out: str | Path, scene: str = DEFAULT_SCENE,
                        stops: Sequence[tuple[float, float]] = LIVING_ROOM_STOPS,
                        scale: float = 1.0) -> Path:
-    robot = SimRobot(World(scene))
+    world = World(scene)
+    for k, (x, y) in enumerate(stops):
+        world.check_free(x, y, ROBOT_CLEARANCE, f"stop {k + 1}")
+    robot = SimRobot(world)
     return write_png(out, contact_sheet(survey_views(robot, stops), scale))
