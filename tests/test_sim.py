@@ -20,7 +20,7 @@ from twin.devices import (
     NotConnectedError,
     OutOfRangeError,
 )
-from twin.errors import InputError
+from twin.errors import InputError, TwinError
 from twin.geometry import CameraModel, Pose2D
 from twin.sim.render import FrameRenderer
 from twin.sim.robot import CAMERA_NAME, SimCamera, SimRobot, make_sim_robot
@@ -245,3 +245,16 @@ def test_cli_snapshot_and_drive(capsys, tmp_path) -> None:
     assert main(["sim", "drive", "--to", "2.3,3.2,45"]) == 0
     text = capsys.readouterr().out
     assert "odometry vs truth" in text and "real time" in text
+
+
+def test_a_missing_gl_context_is_a_one_line_error_with_the_remedy(monkeypatch) -> None:
+    def no_context(*args, **kwargs):
+        raise RuntimeError("Cannot initialize a EGL device display.\nmore detail")
+
+    monkeypatch.setattr(mujoco, "Renderer", no_context)
+    _, robot = make_sim_robot()
+    with pytest.raises(TwinError) as caught, robot:
+        pass
+    message = str(caught.value)
+    assert "\n" not in message and "libegl1" in message and "MUJOCO_GL=osmesa" in message
+    assert not robot.base.is_connected  # the devices opened before the camera were closed

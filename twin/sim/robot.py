@@ -236,21 +236,26 @@ class SimRobot:
         return self.odometry_pose()
 
     # -- head -----------------------------------------------------------------------------------
-    def move_head(self, pan: float, tilt: float, speed: float | None = None,
-                  timeout: float = 10.0) -> tuple[float, float]:
+    def command_head(self, pan: float, tilt: float, speed: float | None = None) -> None:
+        """Start moving the head toward (pan, tilt) at up to ``speed`` rad/s (default: the
+        VC-C4's top speeds) and return at once; the motion happens as time is stepped."""
         self.head_limits.check("sim pan-tilt", pan, tilt, speed)
         self._head_goal = [pan, tilt]
         self._head_speed = [min(speed or math.inf, self.head_limits.pan_speed),
                             min(speed or math.inf, self.head_limits.tilt_speed)]
 
-        def there() -> bool:
-            at = self.head()
-            still = max(map(abs, self.head_rates())) < math.radians(1.0)
-            return still and all(abs(a - g) < HEAD_TOLERANCE
-                                 for a, g in zip(at, self._head_goal, strict=True))
+    def head_settled(self) -> bool:
+        """True once the head rests within ``HEAD_TOLERANCE`` of its commanded angles."""
+        still = max(map(abs, self.head_rates())) < math.radians(1.0)
+        return still and all(abs(a - g) < HEAD_TOLERANCE
+                             for a, g in zip(self.head(), self._head_goal, strict=True))
 
-        self._run_until(there, timeout, f"move to pan {math.degrees(pan):.1f} deg, tilt "
-                        f"{math.degrees(tilt):.1f} deg", "sim pan-tilt")
+    def move_head(self, pan: float, tilt: float, speed: float | None = None,
+                  timeout: float = 10.0) -> tuple[float, float]:
+        """Move the head and step the world until it has settled there; returns (pan, tilt)."""
+        self.command_head(pan, tilt, speed)
+        self._run_until(self.head_settled, timeout, f"move to pan {math.degrees(pan):.1f} deg, "
+                        f"tilt {math.degrees(tilt):.1f} deg", "sim pan-tilt")
         return self.head()
 
     def stop_head(self) -> None:
