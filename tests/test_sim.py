@@ -22,6 +22,7 @@ from twin.devices import (
 )
 from twin.errors import InputError, TwinError
 from twin.geometry import CameraModel, Pose2D
+from twin.sim.drive import DiffDriveGeometry, Odometry
 from twin.sim.render import FrameRenderer
 from twin.sim.robot import CAMERA_NAME, SimCamera, SimRobot, make_sim_robot
 from twin.sim.training import training_views
@@ -258,3 +259,22 @@ def test_a_missing_gl_context_is_a_one_line_error_with_the_remedy(monkeypatch) -
     message = str(caught.value)
     assert "\n" not in message and "libegl1" in message and "MUJOCO_GL=osmesa" in message
     assert not robot.base.is_connected  # the devices opened before the camera were closed
+
+
+def test_odometry_integrates_an_arc_exactly() -> None:
+    geometry = DiffDriveGeometry(wheel_radius=0.1, track=0.4)
+    odometry = Odometry(geometry, Pose2D(1.0, 2.0, 0.0), 0.0, 0.0)
+    radius, quarter = 1.5, math.pi / 2  # a left quarter circle about (1.0, 3.5)
+    left = (radius - 0.2) * quarter / 0.1
+    right = (radius + 0.2) * quarter / 0.1
+    odometry.update(left, right)  # one update: the chord formula must still be exact
+    assert (odometry.x, odometry.y, odometry.yaw) == pytest.approx((2.5, 3.5, quarter))
+
+
+def test_turning_on_the_spot_stays_on_the_spot() -> None:
+    robot = SimRobot(World("living_room"), Pose2D(2.5, 3.3, 0.0))
+    for k in range(1, 8):
+        robot.go_to(Pose2D(2.5, 3.3, math.radians(45.0 * k)))
+        truth = robot.truth_pose()
+        assert truth.distance_to(Pose2D(2.5, 3.3, 0.0)) < 0.01
+        assert abs(math.degrees(truth.heading_error_to(Pose2D(0, 0, math.radians(45.0 * k))))) < 3

@@ -86,6 +86,7 @@ class GoToController:
         self.limits = limits
         self.xy_tolerance = xy_tolerance
         self.yaw_tolerance = yaw_tolerance
+        self.near = 3.0 * xy_tolerance
         self.phase = "turn"
         self._v = 0.0
         self._w = 0.0
@@ -106,7 +107,9 @@ class GoToController:
         dx, dy = self.goal.x - pose.x, self.goal.y - pose.y
         dist = math.hypot(dx, dy)
         if self.phase == "turn":
-            if dist <= self.xy_tolerance:
+            # already close (e.g. a pure turn at a stop): a pivot-drive-pivot to fix a
+            # centimetre would be slower and no better
+            if dist <= self.near:
                 self.phase = "align"
             else:
                 err = float(wrap_angle(math.atan2(dy, dx) - pose.yaw))
@@ -133,7 +136,7 @@ class GoToController:
             err = pose.heading_error_to(self.goal)
             if abs(err) < self.yaw_tolerance and abs(self._w) < 0.05:
                 # a drive that ended off the goal (slip, a nudge) starts over, else done
-                self.phase = "turn" if dist > 3.0 * self.xy_tolerance else "done"
+                self.phase = "turn" if dist > self.near else "done"
             else:
                 return self._ramp(0.0, _approach(err, lim.turn_rate, 0.5 * lim.turn_accel, 4.0), dt)
         return self._ramp(0.0, 0.0, dt)

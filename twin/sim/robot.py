@@ -42,6 +42,10 @@ STALL_TORQUE = 3.0  # N m
 STALL_TIME = 0.5  # s
 
 
+def _fmt(pose: Pose2D) -> str:
+    return f"({pose.x:.2f}, {pose.y:.2f}) m, {math.degrees(pose.yaw):.1f} deg"
+
+
 def _id(model: mujoco.MjModel, kind: mujoco.mjtObj, name: str) -> int:
     idx = mujoco.mj_name2id(model, kind, name)
     if idx < 0:
@@ -176,7 +180,7 @@ class SimRobot:
         while not finished():
             if self.world.time >= end:
                 raise DeviceTimeoutError(device, what, f"not finished after {timeout:g} s "
-                                         f"simulated (truth {self.truth_pose()})",
+                                         f"simulated (truth {_fmt(self.truth_pose())})",
                                          "check the path is free or allow more time")
             self.step()
 
@@ -196,11 +200,12 @@ class SimRobot:
             if self.world.time >= end:
                 self.set_wheel_speeds(0.0, 0.0)
                 raise DeviceTimeoutError(
-                    "sim base", f"go to {goal}", f"not there after {timeout:g} s simulated; "
-                    f"odometry {self.odometry_pose()}", "check that the path is free of furniture")
+                    "sim base", f"go to {_fmt(goal)}", f"not there after {timeout:g} s "
+                    f"simulated; odometry {_fmt(self.odometry_pose())}",
+                    "check that the path is free of furniture")
             self.set_wheel_speeds(*controller.command(self.odometry_pose(), dt))
             self.step()
-            stalled_since = self._stall_check(stalled_since, f"go to {goal}")
+            stalled_since = self._stall_check(stalled_since, f"go to {_fmt(goal)}")
         self.set_wheel_speeds(0.0, 0.0)
         self.advance(0.2)  # let the servos bring the wheels to rest
         return self.odometry_pose()
@@ -219,7 +224,7 @@ class SimRobot:
         if self.world.time - since > STALL_TIME:
             self.set_wheel_speeds(0.0, 0.0)
             raise DeviceFaultError("sim base", asked, "wheel motors stalled: the path "
-                                   f"is blocked at {self.truth_pose()}",
+                                   f"is blocked at {_fmt(self.truth_pose())}",
                                    "choose a stop with a free straight path to it")
         return since
 
@@ -369,7 +374,7 @@ class SimBase(_SimDevice, Base):
         self.robot.odometry.reset(pose, *self.robot._wheel_angles())
 
     def go_to(self, goal: Pose2D, *, timeout: float = 60.0) -> Pose2D:
-        self.require_connected(f"go to {goal}")
+        self.require_connected(f"go to {_fmt(goal)}")
         return self.robot.go_to(goal, timeout)
 
     def drive(self, speed: float, turn_rate: float, duration: float) -> Pose2D:
