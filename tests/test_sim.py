@@ -278,3 +278,13 @@ def test_turning_on_the_spot_stays_on_the_spot() -> None:
         truth = robot.truth_pose()
         assert truth.distance_to(Pose2D(2.5, 3.3, 0.0)) < 0.01
         assert abs(math.degrees(truth.heading_error_to(Pose2D(0, 0, math.radians(45.0 * k))))) < 3
+
+
+def test_the_base_can_report_truth_instead_of_odometry() -> None:
+    sim, robot = make_sim_robot(start=Pose2D(2.5, 3.3, 0.0), pose_source="truth")
+    with robot.base as base:
+        base.set_pose(Pose2D(0.0, 0.0, 0.0))  # re-anchors odometry only
+        assert base.pose() == sim.truth_pose()
+    assert sim.odometry_pose().distance_to(sim.truth_pose()) > 1.0
+    with pytest.raises(InputError, match="pose source"):
+        make_sim_robot(pose_source="slam")

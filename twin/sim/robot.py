@@ -149,6 +149,10 @@ class SimRobot:
         self._wheels = (0.0, 0.0)
         self.world.forward()
         self.advance(settle)
+        self.reset_odometry(pose)
+
+    def reset_odometry(self, pose: Pose2D) -> None:
+        """Anchor the odometry estimate at ``pose`` (moves nothing)."""
         self.odometry.reset(pose, *self._wheel_angles())
 
     # -- stepping -------------------------------------------------------------------------------
@@ -267,9 +271,10 @@ class SimRobot:
         d = self.world.data
         self._head_goal = [float(d.act[a]) for a in self._head_actadr]
 
-    def devices(self, camera: CameraModel = PAPER_CAMERA) -> Robot:
-        """The sim camera, pan-tilt and base as a ``twin.devices.Robot``."""
-        return Robot(SimCamera(self, camera), SimPanTilt(self), SimBase(self))
+    def devices(self, camera: CameraModel = PAPER_CAMERA, pose_source: str = "odometry") -> Robot:
+        """The sim camera, pan-tilt and base as a ``twin.devices.Robot`` (see ``SimBase`` for
+        ``pose_source``)."""
+        return Robot(SimCamera(self, camera), SimPanTilt(self), SimBase(self, pose_source))
 
 
 class _SimDevice:
@@ -353,9 +358,19 @@ class SimPanTilt(_SimDevice, PanTilt):
 
 
 class SimBase(_SimDevice, Base):
-    """The base; its ``pose()`` is wheel odometry, as on the real robot."""
+    """The base. ``pose()`` reports wheel odometry by default, as the real base does; with
+    ``pose_source="truth"`` it reports the ground truth, standing in for the paper's
+    SLAM-localized robot ("the pose of the robot is known at all times")."""
 
     name = "sim base"
+    POSE_SOURCES = ("odometry", "truth")
+
+    def __init__(self, robot: SimRobot, pose_source: str = "odometry") -> None:
+        super().__init__(robot)
+        if pose_source not in self.POSE_SOURCES:
+            raise InputError(f"sim base pose source {pose_source!r}: use one of "
+                             f"{', '.join(self.POSE_SOURCES)}")
+        self.pose_source = pose_source
 
     def connect(self) -> None:
         self._connected = True
@@ -367,11 +382,13 @@ class SimBase(_SimDevice, Base):
 
     def pose(self) -> Pose2D:
         self.require_connected("read the pose")
+        if self.pose_source == "truth":
+            return self.robot.truth_pose()
         return self.robot.odometry_pose()
 
     def set_pose(self, pose: Pose2D) -> None:
         self.require_connected("set the pose")
-        self.robot.odometry.reset(pose, *self.robot._wheel_angles())
+        self.robot.reset_odometry(pose)
 
     def go_to(self, goal: Pose2D, *, timeout: float = 60.0) -> Pose2D:
         self.require_connected(f"go to {_fmt(goal)}")
@@ -394,8 +411,9 @@ class SimBase(_SimDevice, Base):
 
 
 def make_sim_robot(scene: str = DEFAULT_SCENE, start: Pose2D | None = None,
-                   camera: CameraModel = PAPER_CAMERA) -> tuple[SimRobot, Robot]:
+                   camera: CameraModel = PAPER_CAMERA,
+                   pose_source: str = "odometry") -> tuple[SimRobot, Robot]:
     """Load a scene, put the robot at ``start`` (default: the scene's), return both the
     ``SimRobot`` (ground truth, world) and its devices as a ``twin.devices.Robot``."""
     sim = SimRobot(World(scene), start)
-    return sim, sim.devices(camera)
+    return sim, sim.devices(camera, pose_source)
