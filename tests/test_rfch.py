@@ -87,27 +87,14 @@ def test_intersection_of_identical_histograms_is_one_and_of_disjoint_ones_zero()
     counts = kernels.pair_counts(labels, widths, 4, 0, 8, 0, 8).astype(np.float64)
     model = (counts / counts.sum()).astype(np.float32).reshape(1, -1)
     whole = np.array([[0, 8]])
-    same = kernels.patch_scores(labels, widths, whole, whole, model)
-    assert same[0, 0] == pytest.approx(1.0, abs=1e-6)
+    owner = np.zeros(1, dtype=np.int64)
+    same = kernels.patch_scores(labels, widths, whole, whole, model, owner, 1)
+    assert same[0, 0, 0] == pytest.approx(1.0, abs=1e-6)
     assert intersection(model.reshape(4, 4), counts) == pytest.approx(1.0, abs=1e-6)
     other = (labels + 2).astype(np.int32)  # labels 2 and 3: no bin in common
-    assert kernels.patch_scores(other, widths, whole, whole, model)[0, 0] == 0.0
+    assert kernels.patch_scores(other, widths, whole, whole, model, owner, 1)[0, 0, 0] == 0.0
     empty = np.full((8, 8), -1, dtype=np.int32)
-    assert kernels.patch_scores(empty, widths, whole, whole, model)[0, 0] == 0.0
-
-
-def test_colour_table_never_rejects_an_accepted_pixel(model: RFCH) -> None:
-    frame, _ = scene(5)
-    desc = model.params  # labelling with and without the colour shortcut must agree
-    from twin.rfch.descriptor import raw_descriptors
-
-    sampled = raw_descriptors(frame, desc, model.params.sample_step)
-    everything = np.ones((1, 1), dtype=bool)
-    full = kernels.label_samples(
-        sampled, model.offset, model.scale, model.centres, model.radius**2, True, everything
-    )
-    np.testing.assert_array_equal(model.label(sampled), full)
-    assert (full >= 0).any() and (full < 0).any()
+    assert kernels.patch_scores(empty, widths, whole, whole, model, owner, 1)[0, 0, 0] == 0.0
 
 
 # ------------------------------------------------------------------ detection
@@ -347,3 +334,42 @@ def test_column_truth_and_roc() -> None:
     assert swapped.auc == pytest.approx(0.0)
     with pytest.raises(InputError, match="positive and negative"):
         roc_curve(scores, np.zeros(9))
+
+
+# ------------------------------------------------------------------ shared codebook
+
+
+def test_objects_on_a_shared_codebook_are_scored_together_and_alone_alike(model: RFCH) -> None:
+    rings_frame, rings_mask = scene(13, centre=(40, 40))
+    rng = np.random.default_rng(14)
+    square = cloudy_background(rng, 96, 128)
+    square[50:80, 80:110] = [250, 120, 200]  # a pink square with a dark stripe
+    square[60:64, 80:110] = [40, 20, 30]
+    square_mask = np.zeros(square.shape[:2], dtype=bool)
+    square_mask[50:80, 80:110] = True
+    rings, pink = RFCH.train_shared(
+        {"rings": ([rings_frame], [rings_mask]), "pink": ([square], [square_mask])}, **SMALL
+    )
+    assert rings.codebook_key == pink.codebook_key != model.codebook_key
+    np.testing.assert_array_equal(rings.centres, pink.centres)
+    assert rings.summary["codebook"]["objects"] == ["rings", "pink"]
+    late = RFCH.train("late", [rings_frame], [rings_mask], codebook=rings, views="per_view")
+    assert late.codebook_key == rings.codebook_key
+
+    frame, _ = scene(15, centre=(90, 40))
+    frame[10:40, 10:40] = square[50:80, 80:110]  # the pink square, top left
+    together = Detector([rings, model, pink, late]).scores(frame)
+    for index, alone in enumerate([rings, model, pink, late]):
+        np.testing.assert_array_equal(together[index], alone.scores(frame))
+    # Each object is still found where it is, on the shared codebook.
+    for layer, xy in ((together[0], (90, 40)), (together[2], (25, 25))):
+        best = tuple(int(v) for v in np.unravel_index(np.argmax(layer), layer.shape))
+        assert best in box_containing(rings, frame.shape, xy)
+
+
+def test_a_reused_codebook_takes_only_views(model: RFCH) -> None:
+    frame, mask = scene(0)
+    with pytest.raises(InputError, match="only 'views'"):
+        RFCH.train("x", [frame], [mask], codebook=model, n_clusters=4)
+    with pytest.raises(InputError, match="at least one object"):
+        RFCH.train_shared({})

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from twin.rfch import RFCH
+from twin.rfch import RFCH, Detector, kernels
 from twin.rfch.descriptor import raw_descriptors
 from twin.rfch.reference import reference_labels, reference_scores
 from twin.rfch.synthetic import cloudy_background, paste, striped_object
@@ -64,4 +64,43 @@ def test_sampled_descriptor_equals_the_full_descriptor_sampled() -> None:
             full[::step, ::step],
             rtol=1e-6,
             atol=1e-7,
+        )
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_shared_cell_pair_counting_equals_counting_per_patch(seed: int) -> None:
+    """Random label images and grids: the cell kernel gives the per-patch kernel's scores."""
+    rng = np.random.default_rng(seed)
+    h, w = rng.integers(20, 50, size=2)
+    n_labels = int(rng.integers(2, 8))
+    labels = rng.integers(0, n_labels, size=(h, w)).astype(np.int32)
+    labels[rng.random((h, w)) < 0.5] = -1
+    widths = kernels.half_widths(float(rng.uniform(1.0, 6.0)), 1)
+    size = int(rng.choice([6, 8, 12]))
+    stride = int(rng.choice([size // 2, size]))
+    rows = np.arange(0, h - size + 1, stride)
+    cols = np.arange(0, w - size + 1, stride)
+    row_bounds = np.stack([rows, rows + size], axis=1)
+    col_bounds = np.stack([cols, cols + size], axis=1)
+    histograms = rng.random((3, n_labels * n_labels)).astype(np.float32)
+    histograms /= histograms.sum(axis=1, keepdims=True)
+    owners = np.array([0, 1, 1])  # object 1 has two views
+    layout = kernels.cell_layout(row_bounds, col_bounds, len(widths) - 1)
+    assert layout is not None
+    cell, span, row_cells, col_cells = layout
+    direct = kernels.patch_scores(labels, widths, row_bounds, col_bounds, histograms, owners, 2)
+    shared = kernels.cell_patch_scores(
+        labels, widths, cell, span, row_cells, col_cells, histograms, owners, 2
+    )
+    assert direct.max() > 0.1
+    np.testing.assert_allclose(shared, direct, atol=1e-6)
+
+
+def test_detector_kernels_agree_on_a_frame() -> None:
+    model, tests = frames(3, 2)
+    for frame in tests:
+        np.testing.assert_allclose(
+            Detector([model]).scores(frame),
+            Detector([model], share_cells=False).scores(frame),
+            atol=1e-6,
         )

@@ -180,7 +180,7 @@ def _train(args: argparse.Namespace) -> int:
     summary = model.summary
     print(
         f"{args.out}: {model.name!r} from {summary['views']} view(s), "
-        f"{summary['object_pixels']} object px, {summary['clusters']} clusters"
+        f"{summary['object_pixels']} object px, {model.n_clusters} clusters"
     )
     return 0
 

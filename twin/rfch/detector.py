@@ -19,14 +19,16 @@ from twin.errors import InputError
 from twin.rfch import kernels
 from twin.rfch.descriptor import check_image, raw_descriptors, sample_bounds
 from twin.rfch.model import RFCH
-from twin.rfch.params import PatchGrid
+from twin.rfch.params import PatchGrid, RFCHParams
 
 
 class Detector:
     """Scores every patch of a frame for each of ``models`` (one layer per object)."""
 
-    def __init__(self, models: Sequence[RFCH]) -> None:
+    def __init__(self, models: Sequence[RFCH], share_cells: bool = True) -> None:
+        """``share_cells=False`` forces the per-patch pair kernel (for tests and benchmarks)."""
         self.models = list(models)
+        self.share_cells = share_cells
         if not self.models:
             raise InputError("a Detector needs at least one RFCH model")
         for model in self.models:
@@ -40,13 +42,17 @@ class Detector:
                 + "; re-train them with equal --patch-size and --stride"
             )
         self.grid: PatchGrid = grids.pop()
-        self._widths = {
-            (m.params.d_max, m.params.sample_step): kernels.half_widths(
-                m.params.d_max, m.params.sample_step
-            )
-            for m in self.models
-        }
-        self._flat = [m.flat_histograms() for m in self.models]
+        # Models with one codebook are one group: labelled and pair-counted together.
+        groups: dict[str, list[int]] = {}
+        for index, model in enumerate(self.models):
+            groups.setdefault(model.codebook_key, []).append(index)
+        self._groups = []
+        for members in groups.values():
+            histograms = np.concatenate([self.models[i].flat_histograms() for i in members])
+            owners = np.concatenate(
+                [np.full(len(self.models[i].histograms), k) for k, i in enumerate(members)]
+            ).astype(np.int64)
+            self._groups.append((members, np.ascontiguousarray(histograms), owners))
 
     @property
     def names(self) -> list[str]:
@@ -75,14 +81,13 @@ class Detector:
         image = check_image(image, "frame")
         rows_px = self.grid.starts(image.shape[0])
         cols_px = self.grid.starts(image.shape[1])
-        t1 = clock()
+        stages = {"check": clock() - t0, "descriptor": 0.0, "labelling": 0.0}
+        stages["pairs+intersection"] = 0.0
         # One descriptor pass per distinct (descriptor setting, sample step): normally one.
         descriptors: dict[tuple, np.ndarray] = {}
-        elapsed_desc = 0.0
-        elapsed_label = 0.0
-        elapsed_pairs = 0.0
         out = np.empty((len(self.models), len(rows_px), len(cols_px)), dtype=np.float32)
-        for index, model in enumerate(self.models):
+        for members, histograms, owners in self._groups:
+            model = self.models[members[0]]
             params = model.params
             key = (params.descriptor_key, params.sample_step)
             t = clock()
@@ -91,24 +96,38 @@ class Detector:
             t_desc = clock()
             labels = model.label(descriptors[key])
             t_label = clock()
-            step = params.sample_step
-            out[index] = kernels.patch_scores(
-                labels,
-                self._widths[(params.d_max, step)],
-                sample_bounds(rows_px, self.grid.size, step),
-                sample_bounds(cols_px, self.grid.size, step),
-                self._flat[index],
+            out[members] = self._patch_scores(
+                labels, rows_px, cols_px, params, histograms, owners, len(members)
             )
-            t_pairs = clock()
-            elapsed_desc += t_desc - t
-            elapsed_label += t_label - t_desc
-            elapsed_pairs += t_pairs - t_label
+            stages["descriptor"] += t_desc - t
+            stages["labelling"] += t_label - t_desc
+            stages["pairs+intersection"] += clock() - t_label
         if timings is not None:
-            for stage, seconds in (
-                ("check", t1 - t0),
-                ("descriptor", elapsed_desc),
-                ("labelling", elapsed_label),
-                ("pairs+intersection", elapsed_pairs),
-            ):
+            for stage, seconds in stages.items():
                 timings[stage] = timings.get(stage, 0.0) + seconds
         return out
+
+    def _patch_scores(
+        self,
+        labels: np.ndarray,
+        rows_px: np.ndarray,
+        cols_px: np.ndarray,
+        params: RFCHParams,
+        histograms: np.ndarray,
+        owners: np.ndarray,
+        n_objects: int,
+    ) -> np.ndarray:
+        """Pair counting and intersection: the shared-cell kernel where the grid allows it."""
+        step = params.sample_step
+        widths = kernels.half_widths(params.d_max, step)
+        row_bounds = sample_bounds(rows_px, self.grid.size, step)
+        col_bounds = sample_bounds(cols_px, self.grid.size, step)
+        layout = kernels.cell_layout(row_bounds, col_bounds, len(widths) - 1)
+        if layout is None or not self.share_cells:
+            return kernels.patch_scores(
+                labels, widths, row_bounds, col_bounds, histograms, owners, n_objects
+            )
+        cell, span, row_cells, col_cells = layout
+        return kernels.cell_patch_scores(
+            labels, widths, cell, span, row_cells, col_cells, histograms, owners, n_objects
+        )

@@ -2,9 +2,11 @@
 
 from __future__ import annotations
 
+import hashlib
+import json
 import os
-from collections.abc import Sequence
-from dataclasses import dataclass, field
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import cv2
@@ -69,9 +71,7 @@ class RFCH:
         self.centres = np.ascontiguousarray(self.centres, dtype=np.float32)
         self.radius = self.radius.astype(np.float32)
         self.histograms = np.ascontiguousarray(hist, dtype=np.float32)
-        self._colour_table = kernels.colour_table(
-            self.offset, self.scale, self.centres, self.radius
-        )
+        self._codebook_key: str | None = None
 
     # ---------------------------------------------------------------- training
     @classmethod
@@ -80,6 +80,7 @@ class RFCH:
         name: str,
         images: Sequence[np.ndarray],
         masks: Sequence[np.ndarray],
+        codebook: RFCH | None = None,
         **params: Any,
     ) -> RFCH:
         """Train on one or more views (H×W×3 uint8 images, H×W bool masks of the object).
@@ -88,29 +89,67 @@ class RFCH:
         pixels, z-scoring with their statistics (colour weighted), seeded k-means, per-cluster
         mean distance, then the pair histogram of the masked training pixels built exactly as
         for a test patch (same labelling with rejection, same d_max and sample step).
+
+        With ``codebook`` (another model), its codebook and parameters are reused and only this
+        object's histogram is built, so a ``Detector`` labels and counts pairs once for both;
+        only ``views`` may then be given.
+        """
+        if codebook is None:
+            return cls.train_shared({name: (images, masks)}, **params)[0]
+        if set(params) - {"views"}:
+            raise InputError(
+                f"with a codebook only 'views' may be given, got {sorted(params)}; the other "
+                "parameters come from the codebook's model"
+            )
+        config = replace(codebook.params, **params)
+        views = _checked_views(name, images, masks, config)
+        histograms, pairs = _histograms(
+            views, config, codebook.offset, codebook.scale, codebook.centres, codebook.radius
+        )
+        summary = {
+            **_view_summary(views, pairs),
+            "codebook": dict(codebook.summary.get("codebook", {}), reused_from=codebook.name),
+        }
+        return cls(
+            name,
+            config,
+            codebook.offset,
+            codebook.scale,
+            codebook.centres,
+            codebook.radius,
+            histograms,
+            summary,
+        )
+
+    @classmethod
+    def train_shared(
+        cls, objects: Mapping[str, tuple[Sequence[np.ndarray], Sequence[np.ndarray]]], **params: Any
+    ) -> list[RFCH]:
+        """Train several objects on ONE codebook: {name: (images, masks)} → one model each.
+
+        The spec's remedy for cost linear in the number of objects: k-means runs on the pixels
+        of all objects (each object contributing an equal share of ``max_training_pixels``), so
+        a ``Detector`` labels each frame and counts its pairs once for all of them; each extra
+        object then costs one histogram intersection per patch. The price is the per-object
+        rejection: a pixel is background only if it is far from every object's colours.
         """
         config = RFCHParams.from_json(params)
-        images = list(images)
-        masks = list(masks)
-        if not images:
-            raise InputError("training needs at least one image with its mask")
-        if len(images) != len(masks):
-            raise InputError(f"got {len(images)} training images but {len(masks)} masks")
-        checked = []
-        for index, (image, mask) in enumerate(zip(images, masks, strict=True)):
-            image = check_image(image, f"training image {index}")
-            mask = check_mask(mask, image.shape, f"training mask {index}")
-            checked.append((raw_descriptors(image, config), mask))
+        if not objects:
+            raise InputError("training needs at least one object")
+        views = {name: _checked_views(name, *data, config) for name, data in objects.items()}
         rng = np.random.default_rng(config.seed)
-
-        pixels = np.concatenate([desc[mask] for desc, mask in checked])
+        share = max(config.max_training_pixels // len(views), 2)
+        pixel_sets = []
+        for object_views in views.values():
+            pixels = np.concatenate([desc[mask] for desc, mask in object_views])
+            if len(pixels) > share:
+                pixels = pixels[np.sort(rng.choice(len(pixels), share, replace=False))]
+            pixel_sets.append(pixels)
+        pixels = np.concatenate(pixel_sets)
         mean = pixels.mean(axis=0, dtype=np.float64)
         std = np.maximum(pixels.std(axis=0, dtype=np.float64), _MIN_STD)
         scale = 1.0 / std
         scale[:2] *= config.colour_weight
-        if len(pixels) > config.max_training_pixels:
-            pick = rng.choice(len(pixels), config.max_training_pixels, replace=False)
-            pixels = pixels[np.sort(pick)]
         points = ((pixels - mean) * scale).astype(np.float32)
         centres = _kmeans(points, config.n_clusters, config.kmeans_iterations, rng)
 
@@ -122,49 +161,18 @@ class RFCH:
         mean_distance /= members[keep]
         centres = centres[keep]
         radius = config.alpha * np.maximum(mean_distance, config.min_cluster_radius)
-
-        widths = kernels.half_widths(config.d_max, config.sample_step)
-        per_view = []
-        for index, (desc, mask) in enumerate(checked):
-            view_labels = kernels.label_samples(
-                sample(desc, config.sample_step),
-                mean.astype(np.float32),
-                scale.astype(np.float32),
-                centres,
-                (radius**2).astype(np.float32),
-                True,
-                kernels.colour_table(mean, scale, centres, radius),
-            )
-            view_labels[~sample(mask, config.sample_step)] = -1
-            counts = kernels.pair_counts(
-                view_labels,
-                widths,
-                len(centres),
-                0,
-                view_labels.shape[0],
-                0,
-                view_labels.shape[1],
-            )
-            if counts.sum() == 0:
-                raise InputError(
-                    f"training mask {index} yields no pixel pair within d_max={config.d_max} px "
-                    "after rejection; give a larger object region or lower sample_step"
-                )
-            per_view.append(counts.astype(np.float64))
-        if config.views == "merged":
-            merged = np.sum(per_view, axis=0)
-            histograms = (merged / merged.sum())[None]
-        else:
-            histograms = np.stack([c / c.sum() for c in per_view])
-        summary = {
-            "views": len(checked),
-            "object_pixels": int(sum(int(m.sum()) for _, m in checked)),
+        codebook = {
+            "objects": list(views),
             "kmeans_pixels": len(points),
             "clusters": len(centres),
             "mean_cluster_distance": float(mean_distance.mean()),
-            "pairs_per_view": [int(c.sum()) for c in per_view],
         }
-        return cls(name, config, mean, scale, centres, radius, histograms, summary)
+        models = []
+        for name, object_views in views.items():
+            histograms, pairs = _histograms(object_views, config, mean, scale, centres, radius)
+            summary = {**_view_summary(object_views, pairs), "codebook": codebook}
+            models.append(cls(name, config, mean, scale, centres, radius, histograms, summary))
+        return models
 
     # ---------------------------------------------------------------- files
     def save(self, path: str | os.PathLike[str]) -> None:
@@ -207,6 +215,19 @@ class RFCH:
 
     # ---------------------------------------------------------------- scoring
     @property
+    def codebook_key(self) -> str:
+        """Fingerprint of everything labelling and pair counting depend on: models with equal
+        keys give the same labels and patch pair counts, so a ``Detector`` does that work once."""
+        if self._codebook_key is None:
+            digest = hashlib.sha1()
+            for array in (self.offset, self.scale, self.centres, self.radius):
+                digest.update(np.ascontiguousarray(array).tobytes())
+            shared = {k: v for k, v in self.params.to_json().items() if k != "views"}
+            digest.update(json.dumps(shared, sort_keys=True).encode())
+            self._codebook_key = digest.hexdigest()
+        return self._codebook_key
+
+    @property
     def n_clusters(self) -> int:
         return int(self.centres.shape[0])
 
@@ -216,15 +237,7 @@ class RFCH:
 
     def label(self, descriptors: np.ndarray) -> np.ndarray:
         """Labels (-1 = background) of sampled raw descriptors (h×w×D)."""
-        return kernels.label_samples(
-            descriptors,
-            self.offset,
-            self.scale,
-            self.centres,
-            self.radius**2,
-            True,
-            self._colour_table,
-        )
+        return _label(descriptors, self.offset, self.scale, self.centres, self.radius)
 
     def scores(self, image: np.ndarray) -> np.ndarray:
         """Degree of match in [0, 1] of every patch: (rows, cols) float32."""
@@ -268,15 +281,82 @@ def _kmeans(
     return np.ascontiguousarray(centres, dtype=np.float32)
 
 
+def _checked_views(
+    name: str, images: Sequence[np.ndarray], masks: Sequence[np.ndarray], config: RFCHParams
+) -> list[tuple[np.ndarray, np.ndarray]]:
+    """(full-resolution raw descriptor, mask) per checked training view of one object."""
+    images, masks = list(images), list(masks)
+    if not images:
+        raise InputError(f"training {name!r} needs at least one image with its mask")
+    if len(images) != len(masks):
+        raise InputError(f"{name!r}: got {len(images)} training images but {len(masks)} masks")
+    views = []
+    for index, (image, mask) in enumerate(zip(images, masks, strict=True)):
+        image = check_image(image, f"training image {index} of {name!r}")
+        mask = check_mask(mask, image.shape, f"training mask {index} of {name!r}")
+        views.append((raw_descriptors(image, config), mask))
+    return views
+
+
+def _histograms(
+    views: list[tuple[np.ndarray, np.ndarray]],
+    config: RFCHParams,
+    offset: np.ndarray,
+    scale: np.ndarray,
+    centres: np.ndarray,
+    radius: np.ndarray,
+) -> tuple[np.ndarray, list[int]]:
+    """Normalized model histograms (merged: 1, per view: V) and the pair count of each view."""
+    widths = kernels.half_widths(config.d_max, config.sample_step)
+    per_view = []
+    for index, (desc, mask) in enumerate(views):
+        labels = _label(sample(desc, config.sample_step), offset, scale, centres, radius)
+        labels[~sample(mask, config.sample_step)] = -1
+        counts = kernels.pair_counts(
+            labels, widths, len(centres), 0, labels.shape[0], 0, labels.shape[1]
+        ).astype(np.float64)
+        if counts.sum() == 0:
+            raise InputError(
+                f"training mask {index} yields no pixel pair within d_max={config.d_max} px "
+                "after rejection; give a larger object region or lower sample_step"
+            )
+        per_view.append(counts)
+    if config.views == "merged":
+        merged = np.sum(per_view, axis=0)
+        histograms = (merged / merged.sum())[None]
+    else:
+        histograms = np.stack([c / c.sum() for c in per_view])
+    return histograms, [int(c.sum()) for c in per_view]
+
+
+def _view_summary(views: list[tuple[np.ndarray, np.ndarray]], pairs: list[int]) -> dict[str, Any]:
+    return {
+        "views": len(views),
+        "object_pixels": int(sum(int(mask.sum()) for _, mask in views)),
+        "pairs_per_view": pairs,
+    }
+
+
 def nearest_centres(points: np.ndarray, centres: np.ndarray) -> np.ndarray:
     """(n,) int32 index of the nearest centre of each point (both already in k-means space)."""
-    dims = points.shape[1]
-    return kernels.label_samples(
-        np.ascontiguousarray(points[:, None, :], dtype=np.float32),
-        np.zeros(dims, np.float32),
-        np.ones(dims, np.float32),
+    return kernels.nearest_centres(
+        np.ascontiguousarray(points, dtype=np.float32),
         np.ascontiguousarray(centres, dtype=np.float32),
-        np.zeros(len(centres), np.float32),
-        False,
-        np.ones((1, 1), dtype=bool),
-    )[:, 0]
+    )
+
+
+def _label(
+    descriptors: np.ndarray,
+    offset: np.ndarray,
+    scale: np.ndarray,
+    centres: np.ndarray,
+    radius: np.ndarray,
+) -> np.ndarray:
+    """Labels with rejection (-1 = background) of sampled raw descriptors (h×w×D)."""
+    return kernels.label_samples(
+        descriptors,
+        offset.astype(np.float32),
+        scale.astype(np.float32),
+        np.ascontiguousarray(centres, np.float32),
+        radius.astype(np.float32) ** 2,
+    )
