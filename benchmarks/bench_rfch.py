@@ -77,22 +77,40 @@ def main() -> None:
             f"{stages['pairs+intersection']:9.2f}{np.mean(labelled):10.0%}"
         )
 
-    # ---- several objects sharing the descriptor pass
-    print("\nseveral objects in one Detector, ms per frame (mean over frames):")
-    first = None
-    for count in range(1, len(models) + 1):
-        detector = Detector(models[:count])
-        total = float(
-            np.mean([median_ms(lambda d=detector, f=f: d.scores(f), args.repeats) for f in frames])
-        )
-        first = first or total
-        extra = (total - first) / (count - 1) if count > 1 else 0.0
-        note = (
-            f"  each extra object {extra:.2f} ms = {extra / first:.0%} of the first"
-            if count > 1
-            else ""
-        )
-        print(f"  {count} object(s): {total:6.2f} ms{note}")
+    # ---- several objects: own codebooks (descriptor shared) vs one shared codebook
+    images_masks = {cut.name: tuple(zip(*cut.views, strict=True)) for cut in cuts}
+    shared = RFCH.train_shared(images_masks)
+    for title, pool in (
+        ("own codebook per object (descriptor pass shared)", models),
+        ("one shared codebook (labelling and pair counting shared too)", shared),
+    ):
+        print(f"\nseveral objects in one Detector, {title}, ms per frame:")
+        first = None
+        for count in range(1, len(pool) + 1):
+            detector = Detector(pool[:count])
+            total = float(
+                np.mean(
+                    [median_ms(lambda d=detector, f=f: d.scores(f), args.repeats) for f in frames]
+                )
+            )
+            first = first or total
+            if count == 1:
+                print(f"  1 object:  {total:6.2f} ms")
+            else:
+                extra = (total - first) / (count - 1)
+                print(
+                    f"  {count} objects: {total:6.2f} ms, each extra object {extra:.2f} ms"
+                    f" = {extra / first:.0%} of the first"
+                )
+
+    # ---- pair counting once per cell group vs once per patch
+    detector, per_patch = Detector(models[:1]), Detector(models[:1], share_cells=False)
+    cell_ms = np.mean([median_ms(lambda f=f: detector.scores(f), args.repeats) for f in frames])
+    patch_ms = np.mean([median_ms(lambda f=f: per_patch.scores(f), args.repeats) for f in frames])
+    print(
+        f"\n{cuts[0].name}: pairs counted once per cell group {cell_ms:.2f} ms, "
+        f"once per patch {patch_ms:.2f} ms (whole frame)"
+    )
 
     # ---- the spec verbatim (sample step 1) and the literal NumPy transcription
     exact = train(cuts[0], sample_step=1)

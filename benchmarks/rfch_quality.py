@@ -208,6 +208,20 @@ def separate_models(**params):
     return build
 
 
+def shared_codebook(**params):
+    """All objects of the benchmark on one codebook (``RFCH.train_shared``)."""
+    cache: dict[str, RFCH] = {}
+
+    def build(cut: CutOut):
+        if cut.name not in cache:
+            objects = {c.name: tuple(zip(*c.views, strict=True)) for c in cut_outs()}
+            cache.update({m.name: m for m in RFCH.train_shared(objects, **params)})
+        model = cache[cut.name]
+        return lambda frame: model.scores(frame).max(axis=0)
+
+    return build
+
+
 def backprojection(bins: int = 32):
     """Baseline: the object's (r, g) histogram back-projected, averaged over each patch."""
 
@@ -244,6 +258,8 @@ VARIANTS = {
     "sample-step-1": rfch_variant(sample_step=1),
     "per-view-histograms": rfch_variant(views="per_view"),
     "separate-models": separate_models(),
+    "shared-codebook": shared_codebook(),
+    "shared-codebook-160": shared_codebook(n_clusters=160),
     "backprojection": backprojection(),
 }
 

@@ -138,3 +138,24 @@ def test_bad_paths_and_values_are_one_line_errors(
     err = capsys.readouterr().err
     assert message in err
     assert err.count("\n") == 1 and "Traceback" not in err
+
+
+def test_train_shared_and_reuse_a_codebook(data: Path, tmp_path: Path, capsys) -> None:
+    out = tmp_path / "models"
+    args = ["train-shared", "--object", f"rings={data / 'train'}:{data / 'train_masks'}"]
+    args += ["--object", f"cut={data / 'cutouts'}", "--out-dir", str(out), *SMALL]
+    assert main(args) == 0
+    rings, cut = RFCH.load(out / "rings.npz"), RFCH.load(out / "cut.npz")
+    assert rings.codebook_key == cut.codebook_key
+    assert rings.summary["codebook"]["objects"] == ["rings", "cut"]
+
+    late = tmp_path / "late.npz"
+    args = ["train", "--name", "late", "--images", str(data / "cutouts")]
+    assert main([*args, "--codebook", str(out / "rings.npz"), "--out", str(late)]) == 0
+    assert RFCH.load(late).codebook_key == rings.codebook_key
+    assert main([*args, "--codebook", str(out / "rings.npz"), "--out", str(late), "--alpha", "2"])
+    assert "only 'views'" in capsys.readouterr().err
+
+    bad = ["train-shared", "--object", "nameless", "--out-dir", str(out)]
+    assert main(bad) == 2
+    assert "NAME=IMAGES" in capsys.readouterr().err

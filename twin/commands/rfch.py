@@ -17,6 +17,7 @@ from typing import Any
 
 from twin.commands._args import comma_list
 from twin.errors import InputError
+from twin.rfch.params import VIEW_MODES, RFCHParams
 
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff")
 
@@ -33,27 +34,34 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     train.add_argument("--images", required=True, type=Path, help="directory of training views")
     train.add_argument("--masks", type=Path, help="directory of masks NAME.png (nonzero = object)")
     train.add_argument("--out", required=True, type=Path, help="model file to write (.npz)")
-    train.add_argument("--clusters", type=int, default=80, help="k-means centres N (80)")
-    train.add_argument("--alpha", type=float, default=1.5, help="rejection factor α (1.5)")
-    train.add_argument("--d-max", type=float, default=10.0, help="pair distance, px (10)")
     train.add_argument(
-        "--sigmas",
-        type=comma_list(float, "Gaussian scales in px"),
-        default=(2.0, 4.0),
-        help="Gaussian scales, px (2,4)",
+        "--codebook",
+        type=Path,
+        help="reuse this model's codebook and parameters (then only --views may be given), so "
+        "that a Detector labels and counts pairs once for both objects",
     )
-    train.add_argument("--colour-weight", type=float, default=1.0, help="weight of r, g (1)")
-    train.add_argument("--sample-step", type=int, default=2, help="label every n-th px (2)")
-    train.add_argument("--patch-size", type=int, default=32, help="patch side, px (32)")
-    train.add_argument("--stride", type=int, default=16, help="patch stride, px (16)")
-    train.add_argument(
-        "--views",
-        choices=("merged", "per_view"),
-        default="merged",
-        help="one histogram over all views, or one per view (merged)",
-    )
-    train.add_argument("--seed", type=int, default=0, help="k-means seed (0)")
+    _add_parameters(train)
     train.set_defaults(handler=_train)
+
+    shared = subparsers.add_parser(
+        "train-shared",
+        help="train several objects on one shared codebook (faster detection of many objects)",
+        description="Train several objects on ONE k-means codebook and write DIR/NAME.npz for "
+        "each. A Detector with these models labels each frame and counts its pixel pairs once; "
+        "every further object costs only histogram intersections. "
+        + __doc__.split("File conventions:")[1].replace("\n-", "\n *"),
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    shared.add_argument(
+        "--object",
+        required=True,
+        action="append",
+        metavar="NAME=IMAGES[:MASKS]",
+        help="an object: its name, its image directory and optionally its mask directory",
+    )
+    shared.add_argument("--out-dir", required=True, type=Path, help="directory for the models")
+    _add_parameters(shared)
+    shared.set_defaults(handler=_train_shared)
 
     detect = subparsers.add_parser(
         "detect",
@@ -86,6 +94,56 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="choose the least P_fn with P_fp at most this (default: least P_fp + P_fn)",
     )
     roc.set_defaults(handler=_roc)
+
+
+def _add_parameters(parser: argparse.ArgumentParser) -> None:
+    """The RFCH parameters; left out, each takes its default (shown in brackets)."""
+    defaults = RFCHParams()
+    options: list[tuple[str, Any, str]] = [
+        ("--clusters", int, f"k-means centres N ({defaults.n_clusters})"),
+        ("--alpha", float, f"rejection factor α ({defaults.alpha})"),
+        ("--d-max", float, f"pair distance, px ({defaults.d_max})"),
+        (
+            "--sigmas",
+            comma_list(float, "Gaussian scales in px"),
+            f"Gaussian scales, px ({','.join(f'{v:g}' for v in defaults.sigmas)})",
+        ),
+        ("--colour-weight", float, f"weight of r, g ({defaults.colour_weight})"),
+        ("--sample-step", int, f"label every n-th px ({defaults.sample_step})"),
+        ("--patch-size", int, f"patch side, px ({defaults.patch_size})"),
+        ("--stride", int, f"patch stride, px ({defaults.stride})"),
+        ("--seed", int, f"k-means seed ({defaults.seed})"),
+    ]
+    for flag, kind, text in options:
+        parser.add_argument(flag, type=kind, help=text)
+    parser.add_argument(
+        "--views",
+        choices=VIEW_MODES,
+        help=f"one histogram over all views, or one per view ({defaults.views})",
+    )
+
+
+_PARAMETER_NAMES = {
+    "clusters": "n_clusters",
+    "alpha": "alpha",
+    "d_max": "d_max",
+    "sigmas": "sigmas",
+    "colour_weight": "colour_weight",
+    "sample_step": "sample_step",
+    "patch_size": "patch_size",
+    "stride": "stride",
+    "seed": "seed",
+    "views": "views",
+}
+
+
+def _parameters(args: argparse.Namespace) -> dict[str, Any]:
+    """The RFCH parameters given on the command line, by their ``RFCHParams`` names."""
+    return {
+        field: getattr(args, option)
+        for option, field in _PARAMETER_NAMES.items()
+        if getattr(args, option) is not None
+    }
 
 
 # ---------------------------------------------------------------------------- file reading
@@ -148,40 +206,57 @@ def read_mask(image_path: Path, masks: Path, shape: tuple[int, ...]) -> Any:
 # ---------------------------------------------------------------------------- handlers
 
 
-def _train(args: argparse.Namespace) -> int:
-    from twin.rfch import RFCH
-
+def _read_views(images_dir: Path, masks_dir: Path | None) -> tuple[list[Any], list[Any]]:
+    """Training images and bool masks: from ``masks_dir``, or from each image's alpha channel."""
     images, masks = [], []
-    for path in list_images(args.images):
-        if args.masks is None:
+    for path in list_images(images_dir):
+        if masks_dir is None:
             rgba = read_image(path, keep_alpha=True)
             images.append(rgba[..., :3].copy())
             masks.append(rgba[..., 3] > 0)
         else:
             image = read_image(path)
             images.append(image)
-            masks.append(read_mask(path, args.masks, image.shape))
-    model = RFCH.train(
-        args.name,
-        images,
-        masks,
-        n_clusters=args.clusters,
-        alpha=args.alpha,
-        d_max=args.d_max,
-        sigmas=args.sigmas,
-        colour_weight=args.colour_weight,
-        sample_step=args.sample_step,
-        patch_size=args.patch_size,
-        stride=args.stride,
-        views=args.views,
-        seed=args.seed,
-    )
-    model.save(args.out)
+            masks.append(read_mask(path, masks_dir, image.shape))
+    return images, masks
+
+
+def _describe(path: Path, model: Any) -> str:
     summary = model.summary
-    print(
-        f"{args.out}: {model.name!r} from {summary['views']} view(s), "
+    return (
+        f"{path}: {model.name!r} from {summary['views']} view(s), "
         f"{summary['object_pixels']} object px, {model.n_clusters} clusters"
     )
+
+
+def _train(args: argparse.Namespace) -> int:
+    from twin.rfch import RFCH
+
+    images, masks = _read_views(args.images, args.masks)
+    codebook = RFCH.load(args.codebook) if args.codebook else None
+    model = RFCH.train(args.name, images, masks, codebook=codebook, **_parameters(args))
+    model.save(args.out)
+    print(_describe(args.out, model))
+    return 0
+
+
+def _train_shared(args: argparse.Namespace) -> int:
+    from twin.rfch import RFCH
+
+    objects = {}
+    for text in args.object:
+        name, _, dirs = text.partition("=")
+        images_dir, _, masks_dir = dirs.partition(":")
+        if not name or not images_dir:
+            raise InputError(f"--object {text!r}: expected NAME=IMAGES or NAME=IMAGES:MASKS")
+        if name in objects:
+            raise InputError(f"--object {name!r} is given twice; object names must differ")
+        objects[name] = _read_views(Path(images_dir), Path(masks_dir) if masks_dir else None)
+    models = RFCH.train_shared(objects, **_parameters(args))
+    for model in models:
+        path = args.out_dir / f"{model.name}.npz"
+        model.save(path)
+        print(_describe(path, model))
     return 0
 
 

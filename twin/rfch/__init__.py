@@ -9,8 +9,29 @@ on one frame, sharing the descriptor pass; ``PatchGrid`` gives the patch boxes a
 pixel spans that ``CameraModel.wedges`` turns into bearings.
 """
 
-from twin.rfch.detector import Detector
-from twin.rfch.model import RFCH
-from twin.rfch.params import PatchGrid, RFCHParams
+from __future__ import annotations
+
+import importlib
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from twin.rfch.detector import Detector
+    from twin.rfch.model import RFCH
+    from twin.rfch.params import PatchGrid, RFCHParams
 
 __all__ = ["RFCH", "Detector", "PatchGrid", "RFCHParams"]
+
+# Imported on first use: numba and OpenCV take a quarter second to load, and the command line
+# reads the parameter defaults (twin.rfch.params) just to print its help.
+_HOMES = {
+    "RFCH": "twin.rfch.model",
+    "Detector": "twin.rfch.detector",
+    "PatchGrid": "twin.rfch.params",
+    "RFCHParams": "twin.rfch.params",
+}
+
+
+def __getattr__(name: str) -> Any:
+    if name in _HOMES:
+        return getattr(importlib.import_module(_HOMES[name]), name)
+    raise AttributeError(f"module 'twin.rfch' has no attribute {name!r}")
