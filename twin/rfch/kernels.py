@@ -6,7 +6,7 @@ Semantics (exactly those of ``twin.rfch.reference``, which is plain NumPy and sl
   s = 1 is the spec verbatim. s = 2 labels a quarter of the pixels and counts a sixteenth of
   the pairs; because the descriptor is already smoothed over σ ≥ 2 px, neighbouring pixels carry
   nearly the same label and the normalized histograms change little (measured in
-  ``tests/test_rfch_exact.py``, reported by ``benchmarks/bench_rfch.py``). Pair distances are
+  ``tests/test_rfch_exact.py`` and ``benchmarks/rfch_quality.py``). Pair distances are
   always true pixel distances, so d_max keeps its meaning.
 - A patch's histogram counts unordered pairs of distinct labelled samples that are BOTH inside
   the patch and at most d_max apart: pairs straddling the patch border are not counted. Each
@@ -15,8 +15,12 @@ Semantics (exactly those of ``twin.rfch.reference``, which is plain NumPy and sl
 - Histogram intersection is Σ min(model, patch / total) over the upper triangle; a patch with
   no labelled pair scores 0 (it shows nothing of the object).
 
-Why it is fast: each patch is counted into one K×K scratch matrix that stays in L1 cache, only
-bins touched by the patch are intersected and then reset, and background samples cost one load.
+Why it is fast: labelling settles most (background) samples with one vectorized pass over
+"distance − radius²"; ``cell_patch_scores`` counts every pair once into a sparse histogram of its
+cell group and sums the groups per patch, instead of recounting the pairs that overlapping
+patches share; scratch histograms are reset only where touched; only touched bins are
+intersected; and background samples cost one load. Sample step 2 is the one approximation
+(measured in ``tests/test_rfch_exact.py`` and docs/rfch.md).
 """
 
 from __future__ import annotations
