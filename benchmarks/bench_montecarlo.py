@@ -38,21 +38,35 @@ def main() -> None:
     for trial in range(n):
         run_trial(config, 0.3, 0.3, trial)
     per_trial = (time.perf_counter() - start) / n
-    print(f"one trial of 150 views, 3 rules: {1e3 * per_trial:.2f} ms "
-          f"({1e6 * per_trial / 150:.1f} us per view)")  # fmt: skip
+    print(
+        f"one trial of 150 views, 3 rules: {1e3 * per_trial:.2f} ms "
+        f"({1e6 * per_trial / 150:.1f} us per view)"
+    )
 
     with tempfile.TemporaryDirectory() as folder:
-        argv = ["montecarlo", "--trials", str(args.trials), "--workers", str(args.workers),
-                "--out", str(Path(folder) / "mc"), "--quiet"]  # fmt: skip
+        argv = [
+            "montecarlo",
+            "--trials",
+            str(args.trials),
+            "--workers",
+            str(args.workers),
+            "--out",
+            str(Path(folder) / "mc"),
+            "--quiet",
+        ]
         start = time.perf_counter()
         code = twin_main(argv)
         wall = time.perf_counter() - start
     if code:
         sys.exit(code)
-    print(f"full default sweep (121 settings x {args.trials} trials, 150 views, 3 rules), "
-          f"{args.workers} worker(s): {wall:.1f} s wall")  # fmt: skip
-    print(f"peak memory: this process {peak_rss_mib(resource.RUSAGE_SELF):.0f} MiB, "
-          f"largest worker {peak_rss_mib(resource.RUSAGE_CHILDREN):.0f} MiB")  # fmt: skip
+    print(
+        f"full default sweep (121 settings x {args.trials} trials, 150 views, 3 rules), "
+        f"{args.workers} worker(s): {wall:.1f} s wall"
+    )
+    print(
+        f"peak memory: this process {peak_rss_mib(resource.RUSAGE_SELF):.0f} MiB, "
+        f"largest worker {peak_rss_mib(resource.RUSAGE_CHILDREN):.0f} MiB"
+    )
 
 
 if __name__ == "__main__":

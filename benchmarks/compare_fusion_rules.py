@@ -1,6 +1,7 @@
 """Where the normalized and log-odds rules beat or lose to the paper's accumulate rule.
 
-    twin montecarlo --out runs/montecarlo && python benchmarks/compare_fusion_rules.py runs/montecarlo/results.csv
+    twin montecarlo --out runs/montecarlo
+    python benchmarks/compare_fusion_rules.py runs/montecarlo/results.csv
 
 Splits the settings into the informative region (P_fp + P_fn < 1: a firing is more likely at the
 object than elsewhere) and the rest, where only a rule told the rates (log-odds) can use the
@@ -50,8 +51,10 @@ def main(path: str) -> None:
                 losses = sum(d < -0.10 for d in diffs)
                 worst = min(diffs)
                 best = max(diffs)
-                print(f"             {rule} vs accumulate: wins {wins}, loses {losses} "
-                      f"(by > 10 points); range {100 * worst:+.0f} .. {100 * best:+.0f} points")  # fmt: skip
+                print(
+                    f"             {rule} vs accumulate: wins {wins}, loses {losses} "
+                    f"(by > 10 points); range {100 * worst:+.0f} .. {100 * best:+.0f} points"
+                )
 
 
 if __name__ == "__main__":

@@ -20,6 +20,7 @@ COMMAND_MODULES: tuple[str, ...] = (
     "twin.commands.montecarlo",
     "twin.commands.rfch",
     "twin.commands.sim",
+    "twin.commands.survey",
 )
 
 

@@ -103,3 +103,18 @@ class CameraModel:
             [axis + self.column_bearing(spans[:, 1]), axis + self.column_bearing(spans[:, 0])],
             axis=1,
         )
+
+
+@dataclass(frozen=True)
+class Footprint:
+    """A body's outline on the floor: convex polygon (n, 2) in map metres, CCW, and top height."""
+
+    name: str
+    polygon: np.ndarray
+    top: float
+
+    @property
+    def aabb(self) -> tuple[float, float, float, float]:
+        """(xmin, ymin, xmax, ymax) in metres."""
+        lo, hi = self.polygon.min(axis=0), self.polygon.max(axis=0)
+        return float(lo[0]), float(lo[1]), float(hi[0]), float(hi[1])

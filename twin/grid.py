@@ -205,13 +205,21 @@ class AccumulatorGrid:
         """How many views have been fused into ``name``'s layer."""
         return int(self._views[self._object_index(name)])
 
-    def peaks(self, name: str, k: int = 3) -> Peaks:
-        """The ``k`` strongest local maxima of ``name``'s layer, in metres."""
+    def peaks(self, name: str, k: int = 3, min_separation: float = 0.0) -> Peaks:
+        """The ``k`` strongest local maxima of ``name``'s layer, in metres.
+
+        Peaks closer than ``min_separation`` metres (Chebyshev, at least one cell) to a stronger
+        one are dropped: one object's blob spans several cells, and its shoulders should not
+        count as a second hypothesis.
+        """
         if k < 1:
             raise InputError(f"k must be at least 1, got {k!r}")
+        if not (math.isfinite(min_separation) and min_separation >= 0.0):
+            raise InputError(f"min_separation must be >= 0 metres, got {min_separation!r}")
+        separation = max(1, math.ceil(min_separation / self.spec.cell_size - 1e-9))
         values = self.layer(name)
         found = []
-        for row, col in local_maxima(values, k):
+        for row, col in local_maxima(values, k, separation):
             x, y = self.spec.cell_center(row, col)
             found.append(Peak(row, col, x, y, float(values[row, col])))
         return Peaks(tuple(found))

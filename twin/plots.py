@@ -73,3 +73,43 @@ def figure3(
     fig.suptitle("Localization success (%) over false-positive and false-negative rates")
     fig.tight_layout()
     return save_figure(fig, path)
+
+
+def grid_figure(
+    path: Path,
+    layer: np.ndarray,
+    extent: tuple[float, float, float, float],
+    title: str,
+    furniture: Sequence[tuple[str, np.ndarray]] = (),
+    estimate: tuple[float, float] | None = None,
+    truth: tuple[float, float] | None = None,
+) -> Path:
+    """One accumulator layer drawn like the paper's Figure 2(b): brighter is more confident.
+
+    ``layer`` is indexed [row, col] with row 0 at the bottom (map y up); ``furniture`` holds
+    (name, k x 2 outline in metres) pairs drawn as outlines over the grid, with the room's edge,
+    the estimate (a cross) and, in the simulation, the truth (a circle).
+    """
+    plt = _pyplot()
+    x0, y0, x1, y1 = extent
+    fig, ax = plt.subplots(figsize=(4.2, 4.2 * (y1 - y0) / (x1 - x0) + 0.6))
+    image = ax.imshow(layer, origin="lower", extent=(x0, x1, y0, y1), cmap="gray",
+                      interpolation="nearest")  # fmt: skip
+    fig.colorbar(image, ax=ax, fraction=0.046, pad=0.04, label="accumulated match")
+    ax.plot([x0, x1, x1, x0, x0], [y0, y0, y1, y1, y0], color="tab:blue", lw=1.5)
+    for name, outline in furniture:
+        closed = np.vstack([outline, outline[:1]])
+        ax.plot(closed[:, 0], closed[:, 1], color="tab:orange", lw=0.9)
+        centre = outline.mean(axis=0)
+        ax.text(centre[0], centre[1], name.replace("_", " "), color="tab:orange", fontsize=6,
+                ha="center", va="center")  # fmt: skip
+    if truth is not None:
+        ax.plot(*truth, marker="o", ms=11, mfc="none", mec="tab:green", mew=1.8, label="truth")
+    if estimate is not None:
+        ax.plot(*estimate, marker="x", ms=9, color="tab:red", mew=2.0, label="estimate")
+    if truth is not None or estimate is not None:
+        ax.legend(loc="upper right", fontsize=7, framealpha=0.7)
+    ax.set_xlabel("x (m)")
+    ax.set_ylabel("y (m)")
+    ax.set_title(title, fontsize=9)
+    return save_figure(fig, path)

@@ -20,8 +20,9 @@ import os
 os.environ.setdefault("MUJOCO_GL", "egl")
 
 # Imported after the line above on purpose: each of these imports mujoco.
+from twin.geometry import Footprint
 from twin.sim.robot import SimRobot, make_sim_robot
 from twin.sim.training import training_views
-from twin.sim.world import Footprint, World
+from twin.sim.world import World
 
 __all__ = ["Footprint", "SimRobot", "World", "make_sim_robot", "training_views"]

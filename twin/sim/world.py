@@ -9,14 +9,13 @@ its custom text ``twin_targets``.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 from pathlib import Path
 
 import mujoco
 import numpy as np
 
 from twin.errors import InputError, TwinError
-from twin.geometry import Pose2D
+from twin.geometry import Footprint, Pose2D
 from twin.resources import scenes_dir
 
 DEFAULT_SCENE = "living_room"
@@ -40,21 +39,6 @@ def load_model(path: str | Path) -> mujoco.MjModel:
     except ValueError as exc:
         first = str(exc).strip().splitlines()[0] if str(exc).strip() else "compile error"
         raise TwinError(f"{path}: MuJoCo cannot compile it ({first}); fix the MJCF") from exc
-
-
-@dataclass(frozen=True)
-class Footprint:
-    """A body's outline on the floor: convex polygon (n, 2) in map metres, CCW, and top height."""
-
-    name: str
-    polygon: np.ndarray
-    top: float
-
-    @property
-    def aabb(self) -> tuple[float, float, float, float]:
-        """(xmin, ymin, xmax, ymax) in metres."""
-        lo, hi = self.polygon.min(axis=0), self.polygon.max(axis=0)
-        return float(lo[0]), float(lo[1]), float(hi[0]), float(hi[1])
 
 
 def _convex_hull(points: np.ndarray) -> np.ndarray:
