@@ -76,11 +76,10 @@ def test_base_mode_faces_every_heading_with_the_head_straight():
 # -- resume, exactly, on devices with exact poses -----------------------------------------------
 
 
-class ExactBase(Base):
-    name = "exact base"
+class Switch:
+    """connect/close for the stand-in devices: they only remember whether they are open."""
 
-    def __init__(self):
-        self._pose, self._open = Pose2D(0.5, 0.5, 0.0), False
+    _open = False
 
     def connect(self):
         self._open = True
@@ -91,6 +90,13 @@ class ExactBase(Base):
     @property
     def is_connected(self):
         return self._open
+
+
+class ExactBase(Switch, Base):
+    name = "exact base"
+
+    def __init__(self):
+        self._pose = Pose2D(0.5, 0.5, 0.0)
 
     def pose(self):
         return self._pose
@@ -109,21 +115,11 @@ class ExactBase(Base):
         pass
 
 
-class ExactHead(PanTilt):
+class ExactHead(Switch, PanTilt):
     name = "exact head"
 
     def __init__(self):
-        self.angles, self._open = (0.0, 0.0), False
-
-    def connect(self):
-        self._open = True
-
-    def close(self):
-        self._open = False
-
-    @property
-    def is_connected(self):
-        return self._open
+        self.angles = (0.0, 0.0)
 
     @property
     def limits(self):
@@ -140,23 +136,13 @@ class ExactHead(PanTilt):
         pass
 
 
-class PoseCamera(Camera):
+class PoseCamera(Switch, Camera):
     """Renders nothing: its image is a deterministic function of where the robot looks."""
 
     name = "pose camera"
 
     def __init__(self, base, head):
-        self.base, self.head, self._open = base, head, False
-
-    def connect(self):
-        self._open = True
-
-    def close(self):
-        self._open = False
-
-    @property
-    def is_connected(self):
-        return self._open
+        self.base, self.head = base, head
 
     @property
     def model(self):
