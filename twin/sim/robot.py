@@ -10,6 +10,7 @@ integrate (see models/peoplebot.xml).
 from __future__ import annotations
 
 import math
+import threading
 from collections.abc import Callable
 
 import mujoco
@@ -97,6 +98,8 @@ class SimRobot:
         self._wheels = (0.0, 0.0)
         # called after every physics step (recorders, wire-protocol emulators, tests)
         self.listeners: list[Callable[[SimRobot], None]] = []
+        # Held while stepping and rendering: the serial twins step the world from a thread.
+        self.lock = threading.RLock()
         self.odometry = Odometry(self.geometry, Pose2D(0.0, 0.0, 0.0), 0.0, 0.0)
         self.place(start or world.robot_start() or Pose2D(0.0, 0.0, 0.0))
 
@@ -167,11 +170,12 @@ class SimRobot:
             d.ctrl[act] = float(np.clip((goal - d.act[actadr]) / dt, -speed, speed))
 
     def step(self) -> None:
-        self._apply_controls()
-        self.world.step()
-        self.odometry.update(*self._wheel_angles())
-        for listener in self.listeners:
-            listener(self)
+        with self.lock:
+            self._apply_controls()
+            self.world.step()
+            self.odometry.update(*self._wheel_angles())
+            for listener in self.listeners:
+                listener(self)
 
     def advance(self, seconds: float) -> None:
         """Let simulated time pass with the current commands."""
@@ -325,7 +329,8 @@ class SimCamera(_SimDevice, Camera):
     def grab(self) -> Frame:
         self.require_connected("grab a frame")
         assert self._renderer is not None
-        return Frame(self._renderer.render(self.robot.world.data), self.robot.world.time)
+        with self.robot.lock:
+            return Frame(self._renderer.render(self.robot.world.data), self.robot.world.time)
 
 
 class SimPanTilt(_SimDevice, PanTilt):

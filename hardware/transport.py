@@ -1,0 +1,140 @@
+"""Byte links to devices: a serial port through pyserial, behind one small interface.
+
+Drivers speak their wire protocol over a ``Transport``; what carries the bytes (a serial line,
+a pseudo-terminal, the robot's AUX port tunnelled through ARCOS packets) is not their concern.
+Every read has a timeout, so a device that stops answering is an error, never a hang. Opening a
+port turns the usual failures into one-line ``DeviceError``s that name the device and the remedy.
+"""
+
+from __future__ import annotations
+
+import errno
+from typing import Protocol
+
+import serial
+
+from twin.devices import ConnectionLostError, DeviceError, NotConnectedError
+
+
+class Transport(Protocol):
+    """A byte link with timeouts. ``name`` names the device in errors."""
+
+    name: str
+
+    def write(self, data: bytes) -> None: ...
+
+    def read(self, size: int, timeout: float) -> bytes:
+        """Up to ``size`` bytes, returning early only when ``size`` arrived; fewer (maybe none)
+        when ``timeout`` seconds pass first."""
+        ...
+
+    def reset_input(self) -> None:
+        """Drop whatever has been received and not read (stale answers)."""
+        ...
+
+    def close(self) -> None: ...
+
+
+class SerialTransport:
+    """A serial port (or pseudo-terminal) opened with pyserial, 8N1, no flow control.
+
+    ``rts=True`` asserts RTS after opening (the VC-C4 answers only while its CTS is high); a
+    pseudo-terminal has no modem lines and refuses the ioctl, which is taken as "nothing to
+    assert", not as a failure (specs/protocols.md, part D).
+    """
+
+    def __init__(self, port: str, baudrate: int, name: str, rts: bool = False) -> None:
+        self.port, self.name = port, name
+        try:
+            self._serial = serial.Serial(
+                port,
+                baudrate=baudrate,
+                bytesize=8,
+                parity="N",
+                stopbits=1,
+                timeout=0,
+                rtscts=False,
+                dsrdtr=False,
+            )
+        except serial.SerialException as exc:
+            raise _open_error(name, port, exc) from None
+        if rts:
+            try:
+                self._serial.rts = True
+            except (OSError, serial.SerialException) as exc:
+                if getattr(exc, "errno", None) != errno.ENOTTY and "Inappropriate" not in str(exc):
+                    raise DeviceError(
+                        name,
+                        f"assert RTS on {port}",
+                        str(exc),
+                        "check the cable (null-modem, RTS wired)",
+                    ) from None
+
+    def write(self, data: bytes) -> None:
+        try:
+            self._serial.write(data)
+            self._serial.flush()
+        except (OSError, serial.SerialException) as exc:
+            raise ConnectionLostError(
+                self.name,
+                f"write {len(data)} bytes to {self.port}",
+                str(exc),
+                "check that the device is plugged in",
+            ) from None
+
+    def read(self, size: int, timeout: float) -> bytes:
+        try:
+            self._serial.timeout = max(timeout, 0.0)
+            return self._serial.read(size)
+        except (OSError, serial.SerialException, TypeError) as exc:
+            # pyserial raises TypeError from a closed port's internal state on some versions.
+            raise ConnectionLostError(
+                self.name, f"read from {self.port}", str(exc), "check that the device is plugged in"
+            ) from None
+
+    def reset_input(self) -> None:
+        try:
+            self._serial.reset_input_buffer()
+        except (OSError, serial.SerialException) as exc:
+            raise ConnectionLostError(
+                self.name, f"flush {self.port}", str(exc), "check that the device is plugged in"
+            ) from None
+
+    def close(self) -> None:
+        self._serial.close()
+
+    def require_open(self, asked: str) -> None:
+        if not self._serial.is_open:
+            raise NotConnectedError(self.name, asked, f"{self.port} is closed", "connect first")
+
+
+def _open_error(name: str, port: str, exc: serial.SerialException) -> DeviceError:
+    number = getattr(exc, "errno", None)
+    text = str(exc)
+    if number == errno.ENOENT or "No such file" in text:
+        return DeviceError(
+            name,
+            f"open {port}",
+            "no such port",
+            "check the path; 'twin hw probe' lists the serial ports",
+        )
+    if number == errno.EACCES or "Permission denied" in text:
+        return DeviceError(
+            name,
+            f"open {port}",
+            "permission denied",
+            "add your user to the 'dialout' group and log in again",
+        )
+    if number == errno.EBUSY or "busy" in text.lower():
+        return DeviceError(
+            name,
+            f"open {port}",
+            "the port is busy",
+            "close the other program using it (another driver, minicom, ARIA)",
+        )
+    return DeviceError(
+        name,
+        f"open {port}",
+        text.splitlines()[0] if text else "failed",
+        "check the port and the cable",
+    )

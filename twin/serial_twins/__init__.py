@@ -1,0 +1,7 @@
+"""Serial twins: emulators that speak the real devices' wire protocols on pseudo-terminals.
+
+They are driven by the MuJoCo world, so the real hardware drivers (``hardware/``) run byte for
+byte against the twin: the emulated VC-C4 moves the sim's pan-tilt head, the emulated ARCOS
+base drives the sim's wheels and reports its odometry in SIPs. ``WorldRunner`` steps the world
+in wall-clock time (optionally faster) while the drivers talk to the emulators.
+"""

@@ -1,0 +1,78 @@
+"""Pseudo-terminal links: the driver opens ``path``, the emulator reads and writes the master.
+
+The slave side is put in raw mode (no echo, no line editing, 8 bits through) like a serial
+line, and the emulator keeps its own handle on it so that a driver closing and reopening the
+port does not end the link. ``hangup`` replaces the pseudo-terminal by a new one, as a device
+unplugged and plugged in again would; a stable ``link`` path (a symlink) follows it.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import select
+import termios
+import tty
+from pathlib import Path
+
+
+class PtyLink:
+    """One pseudo-terminal pair; the emulator's end has timed reads and plain writes."""
+
+    def __init__(self, link: str | os.PathLike[str] | None = None) -> None:
+        self.link = Path(link) if link is not None else None
+        self._master = self._slave = -1
+        self._open()
+
+    def _open(self) -> None:
+        self._master, self._slave = os.openpty()
+        tty.setraw(self._slave, termios.TCSANOW)
+        os.set_blocking(self._master, False)
+        self.device = os.ttyname(self._slave)
+        if self.link is not None:
+            tmp = self.link.with_name(self.link.name + ".new")
+            tmp.unlink(missing_ok=True)
+            tmp.symlink_to(self.device)
+            tmp.replace(self.link)
+
+    @property
+    def path(self) -> str:
+        """What a driver should open: the stable link if there is one, else the device."""
+        return str(self.link) if self.link is not None else self.device
+
+    def read(self, size: int, timeout: float) -> bytes:
+        """Up to ``size`` bytes the driver wrote; b"" when none arrive within ``timeout`` s."""
+        if self._master < 0:
+            return b""
+        ready, _, _ = select.select([self._master], [], [], max(timeout, 0.0))
+        if not ready:
+            return b""
+        try:
+            return os.read(self._master, size)
+        except (BlockingIOError, OSError):
+            return b""
+
+    def write(self, data: bytes) -> None:
+        """Send bytes to the driver (dropped, like a line with nobody listening, if it fails)."""
+        view = memoryview(data)
+        while view and self._master >= 0:
+            try:
+                written = os.write(self._master, view)
+            except BlockingIOError:
+                select.select([], [self._master], [], 0.05)
+                continue
+            except OSError:
+                return
+            view = view[written:]
+
+    def hangup(self) -> None:
+        """Close this pseudo-terminal and open a new one (the link, if any, moves to it)."""
+        self.close()
+        self._open()
+
+    def close(self) -> None:
+        for fd in (self._master, self._slave):
+            if fd >= 0:
+                with contextlib.suppress(OSError):
+                    os.close(fd)
+        self._master = self._slave = -1
