@@ -21,6 +21,7 @@ COMMAND_MODULES: tuple[str, ...] = (
     "twin.commands.rfch",
     "twin.commands.sim",
     "twin.commands.survey",
+    "twin.commands.hw",
 )
 
 

@@ -1,0 +1,24 @@
+"""``twin hw``: talk to the real robot's devices (or to their serial twins) from the shell.
+
+Each device's subcommand lives in its own module with ``register(hw_subparsers)``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+
+HW_MODULES: tuple[str, ...] = ()
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    parser = subparsers.add_parser(
+        "hw",
+        help="probe and drive the real devices (VC-C4 head, ARCOS base, cameras)",
+        description="Commands for users at the robot: probe serial ports and cameras, move the "
+        "VC-C4 head, drive the ARCOS base. They work the same against the serial twins "
+        "(twin serve-hardware).",
+    )
+    hw = parser.add_subparsers(dest="hw_command", metavar="DEVICE", required=True)
+    for module_name in HW_MODULES:
+        importlib.import_module(module_name).register(hw)
