@@ -24,13 +24,19 @@ def main() -> None:
     parser.add_argument("--runs", type=int, default=20)
     parser.add_argument("--fusion", default="accumulate")
     parser.add_argument("--tolerance", type=float, default=0.3, help="success radius (m)")
+    parser.add_argument("--p-fp", type=float, default=0.1, help="logodds: detector P_fp")
+    parser.add_argument("--p-fn", type=float, default=0.05, help="logodds: detector P_fn")
+    parser.add_argument("--threshold", type=float, default=0.162, help="logodds: threshold")
     args = parser.parse_args()
     errors = []
     with tempfile.TemporaryDirectory() as name:
         folder = Path(name)
         text = default_config_path().read_text()
         text = text.replace('rerun = "save"', 'rerun = "off"')
-        text = text.replace('fusion = "accumulate"', f'fusion = "{args.fusion}"')
+        rule = f'fusion = "{args.fusion}"'
+        if args.fusion == "logodds":  # rates from benchmarks/rfch_rendered.py by default
+            rule += f"\np_fp = {args.p_fp}\np_fn = {args.p_fn}\nthreshold = {args.threshold}"
+        text = text.replace('fusion = "accumulate"', rule)
         text = text.replace(
             'file = "living_room.xml"',
             f'file = "{default_config_path().parent / "living_room.xml"}"',
