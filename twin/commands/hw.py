@@ -8,7 +8,9 @@ from __future__ import annotations
 import argparse
 import importlib
 
-HW_MODULES: tuple[str, ...] = ()
+HW_MODULES: tuple[str, ...] = (
+    "twin.commands.hw_vcc4",
+)
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
