@@ -1,0 +1,591 @@
+"""The PeopleBot's base over its ARCOS serial protocol, as a ``twin.devices.Base``.
+
+``ArcosBase.open("/dev/ttyS0")`` returns an unconnected base; ``connect()`` (or ``with``) runs
+the SYNC0/1/2 handshake (closing a robot left open by a crashed client first), OPENs the
+servers, enables the motors and sends the motion limits. One background thread then reads
+SIPs into odometry (x/y unwrapped from their 15-bit wrap, heading from 4096ths of a turn),
+collects AUX bytes, and sends a PULSE whenever the line has been quiet for half a second, so
+the robot's 2 s watchdog never trips while we are connected (specs/protocols.md, part B).
+
+Motion is done by the firmware's own servos and checked on the SIP odometry: ``go_to`` turns
+with HEAD, drives with MOVE and turns again, re-planning from the reported pose until it is
+within 3 cm and 1 degree (the promise is 5 cm / 3 degrees); ``drive`` holds VEL and RVEL for a
+wall-clock duration. A stall or bumper bit during motion stops the robot and raises
+``DeviceFaultError``; a robot that stops sending SIPs is a ``DeviceTimeoutError`` within
+``sip_timeout``; a vanished line is a ``ConnectionLostError`` unless ``auto_reconnect`` brings
+it back. ``close()`` sends STOP, ENABLE 0 and CLOSE.
+
+API units: metres, radians, seconds, map frame (``set_pose`` anchors the odometry to it; the
+start pose given at construction anchors the first connection). Wire units (mm, mm/s, degrees)
+are converted here.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import math
+import threading
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+
+from hardware.arcos_codec import (
+    MAX_STRING,
+    Command,
+    PacketParser,
+    Sip,
+    command,
+    is_sip,
+    parse_sip,
+    parse_sync2,
+    xy_delta,
+)
+from hardware.transport import SerialTransport, Transport
+from twin.devices import (
+    Base,
+    ConnectionLostError,
+    DeviceError,
+    DeviceFaultError,
+    DeviceTimeoutError,
+    OutOfRangeError,
+    ProtocolError,
+)
+from twin.geometry import Pose2D, wrap_angle
+
+INTER_BYTE_LIMIT = 0.1  # s of silence inside a packet before it counts as truncated (ARIA)
+XY_TOLERANCE = 0.03  # m: closer than this, go_to only turns (as the sim's controller does)
+YAW_TOLERANCE = math.radians(1.0)
+ORIGIN = Pose2D(0.0, 0.0, 0.0)
+AUX_PORTS = {1: (Command.TTY2, Command.GETAUX, 0xB0), 2: (66, 67, 0xB8), 3: (60, 61, 0xC8)}
+
+
+@dataclass(frozen=True)
+class ArcosLimits:
+    """Motion limits sent to the firmware at connect (SETV, SETA, SETRV, SETRA); also the
+    bounds ``drive`` accepts. SI units."""
+
+    speed: float = 0.5  # m/s
+    accel: float = 0.6  # m/s^2
+    turn_rate: float = math.radians(100.0)  # rad/s
+    turn_accel: float = math.radians(250.0)  # rad/s^2
+
+
+def _compose(a: Pose2D, b: Pose2D) -> Pose2D:
+    """``b`` expressed in ``a``'s frame, taken to ``a``'s parent frame."""
+    c, s = math.cos(a.yaw), math.sin(a.yaw)
+    return Pose2D(a.x + c * b.x - s * b.y, a.y + s * b.x + c * b.y,
+                  float(wrap_angle(a.yaw + b.yaw)))
+
+
+def _relative(a: Pose2D, b: Pose2D) -> Pose2D:
+    """``b`` seen from ``a`` (both in the same frame)."""
+    c, s = math.cos(a.yaw), math.sin(a.yaw)
+    dx, dy = b.x - a.x, b.y - a.y
+    return Pose2D(c * dx + s * dy, -s * dx + c * dy, float(wrap_angle(b.yaw - a.yaw)))
+
+
+def _fmt(pose: Pose2D) -> str:
+    return f"({pose.x:.3f}, {pose.y:.3f}) m, {math.degrees(pose.yaw):.1f} deg"
+
+
+class _Odometry:
+    """Continuous odometry (m, m, rad) from the SIP's wrapping x/y: only deltas are trusted."""
+
+    def __init__(self, sip: Sip) -> None:
+        self._raw = (sip.x, sip.y)
+        self.x_mm = float(sip.x)
+        self.y_mm = float(sip.y)
+        self.yaw = sip.heading
+
+    def update(self, sip: Sip) -> None:
+        self.x_mm += xy_delta(self._raw[0], sip.x)
+        self.y_mm += xy_delta(self._raw[1], sip.y)
+        self._raw = (sip.x, sip.y)
+        self.yaw = sip.heading
+
+    @property
+    def pose(self) -> Pose2D:
+        return Pose2D(self.x_mm / 1000.0, self.y_mm / 1000.0, self.yaw)
+
+
+class ArcosBase(Base):
+    """An ARCOS/AROS robot base on any ``Transport`` (made by ``open_transport`` at connect,
+    again at a reconnect)."""
+
+    def __init__(self, open_transport: Callable[[], Transport], *, name: str = "ARCOS base",
+                 start: Pose2D = ORIGIN, limits: ArcosLimits = ArcosLimits(),
+                 reply_timeout: float = 1.0, sync_attempts: int = 6, sip_timeout: float = 1.0,
+                 pulse_period: float = 0.5, auto_reconnect: bool = True,
+                 reconnect_timeout: float = 5.0) -> None:
+        self.name = name
+        self._open_transport = open_transport
+        self.limits = limits
+        self.reply_timeout, self.sync_attempts = reply_timeout, sync_attempts
+        self.sip_timeout, self.pulse_period = sip_timeout, pulse_period
+        self.auto_reconnect, self.reconnect_timeout = auto_reconnect, reconnect_timeout
+        self._transport: Transport | None = None
+        self._cond = threading.Condition()
+        self._write_lock = threading.Lock()
+        self._stop_io = threading.Event()
+        self._io: threading.Thread | None = None
+        self._connected = False
+        self._lost: DeviceError | None = None
+        self._map_pose = start  # pose to anchor on the next first SIP
+        self._anchor: tuple[Pose2D, Pose2D] | None = None  # (map pose, odometry pose)
+        self._odometry: _Odometry | None = None
+        self._aux: dict[int, bytearray] = {port: bytearray() for port in AUX_PORTS}
+        self._last_write = 0.0
+        self.identity: tuple[str, str, str] | None = None  # SYNC2: name, class, subclass
+        self.last_sip: Sip | None = None
+        self.sip_count = 0
+        self._sip_time = 0.0
+        self.protocol_errors = 0
+        self.last_protocol_error: ProtocolError | None = None
+        self.still_open_recoveries = 0
+        self.reconnects = 0
+        self._settle_from = 0
+
+    @classmethod
+    def open(cls, port: str, baudrate: int = 9600, **options: object) -> ArcosBase:
+        """A base on serial port ``port`` (8N1, no flow control); ``options`` as for the
+        constructor. Nothing is opened until ``connect()``."""
+        name = str(options.pop("name", "ARCOS base"))
+        return cls(lambda: SerialTransport(port, baudrate, name), name=name,
+                   **options)  # type: ignore[arg-type]
+
+    # -- lifecycle ---------------------------------------------------------------------------
+    @property
+    def is_connected(self) -> bool:
+        return self._connected
+
+    def connect(self) -> None:
+        if self._connected:
+            return
+        self._start_link()
+        self._connected = True
+
+    def _start_link(self) -> None:
+        transport = self._open_transport()
+        self._transport, self._lost = transport, None
+        try:
+            self._handshake(transport)
+            self._write(command(Command.OPEN, 1))
+            with self._cond:
+                self._odometry = None
+                first, self._sip_time = self.sip_count, time.monotonic()
+            self._stop_io.clear()
+            self._io = threading.Thread(target=self._io_loop, args=(transport,),
+                                        name=f"{self.name} io", daemon=True)
+            self._io.start()
+            self._await_sip(first, time.monotonic() + 2.0 * self.reply_timeout, "open the robot")
+            lim = self.limits
+            for cmd, value in ((Command.ENABLE, 1), (Command.SETV, lim.speed * 1000.0),
+                               (Command.SETA, lim.accel * 1000.0),
+                               (Command.SETA, -lim.accel * 1000.0),
+                               (Command.SETRV, math.degrees(lim.turn_rate)),
+                               (Command.SETRA, math.degrees(lim.turn_accel)),
+                               (Command.SETRA, -math.degrees(lim.turn_accel))):
+                self._write(command(cmd, round(value)))
+        except BaseException:
+            self._stop_link()
+            raise
+
+    def _stop_link(self) -> None:
+        self._stop_io.set()
+        if self._io is not None and self._io is not threading.current_thread():
+            self._io.join(timeout=1.0)
+        self._io = None
+        if self._transport is not None:
+            with contextlib.suppress(Exception):
+                self._transport.close()
+        self._transport = None
+
+    def close(self) -> None:
+        """STOP, ENABLE 0 and CLOSE (best effort: the line may be gone), then release it."""
+        if self._transport is not None and self._lost is None:
+            with contextlib.suppress(DeviceError):
+                self._write(command(Command.STOP))
+                self._write(command(Command.ENABLE, 0))
+                time.sleep(0.05)
+                self._write(command(Command.CLOSE, 1))
+                time.sleep(0.05)
+        self._stop_link()
+        self._connected = False
+
+    def reconnect(self) -> None:
+        """Open the line again and redo the handshake (a robot still open from before is
+        closed first); odometry continues from the last pose."""
+        with self._cond:
+            if self._anchor is not None and self._odometry is not None:
+                self._map_pose = self._map_pose_now()
+        self._stop_link()
+        end = time.monotonic() + self.reconnect_timeout
+        while True:
+            try:
+                self._start_link()
+                break
+            except (ConnectionLostError, DeviceTimeoutError, ProtocolError):
+                if time.monotonic() > end:
+                    raise
+            except DeviceError:  # the port is not back yet (replugged device, new pty)
+                if time.monotonic() > end:
+                    raise
+            time.sleep(0.2)
+        self.reconnects += 1
+
+    # -- wire --------------------------------------------------------------------------------
+    def _write(self, packet: bytes) -> None:
+        transport = self._transport
+        if transport is None:
+            raise ConnectionLostError(self.name, "send a command", "the line is closed",
+                                      "connect first")
+        with self._write_lock:
+            transport.write(packet)
+            self._last_write = time.monotonic()
+
+    def send(self, cmd: int, arg: int | bytes | None = None) -> None:
+        """Send one raw ARCOS command (number from ``Command``; int in wire units)."""
+        self._require_link(f"send command {cmd}")
+        self._write(command(cmd, arg))
+
+    def _read_packet(self, transport: Transport, parser: PacketParser,
+                     timeout: float) -> bytes | None:
+        end = time.monotonic() + timeout
+        while True:
+            try:
+                data = parser.next()
+            except ProtocolError as exc:
+                self._note_error(exc)
+                continue
+            if data is not None:
+                return data
+            left = end - time.monotonic()
+            if left <= 0:
+                return None
+            parser.feed(transport.read(64, min(left, 0.05)))
+
+    def _note_error(self, exc: ProtocolError) -> None:
+        self.protocol_errors += 1
+        self.last_protocol_error = exc
+
+    def _handshake(self, transport: Transport) -> None:
+        """SYNC0, SYNC1, SYNC2 with replies echoed; any surprise restarts at SYNC0. SIPs in
+        reply mean a robot still open from an earlier client: CLOSE it, wait, resync."""
+        parser = PacketParser(self.name)
+        transport.reset_input()
+        step = attempts = 0
+        while step < 3:
+            if attempts >= self.sync_attempts:
+                raise DeviceTimeoutError(
+                    self.name, f"SYNC{step} handshake", f"no proper reply in {attempts} tries "
+                    f"of {self.reply_timeout:g} s", "check power, cable and baud rate (9600)")
+            attempts += 1
+            self._write(command(step))
+            reply = self._read_packet(transport, parser, self.reply_timeout)
+            if reply is None:
+                step = 0
+            elif is_sip(reply):
+                self.still_open_recoveries += 1
+                self._write(command(Command.CLOSE, 1))
+                time.sleep(0.4)
+                transport.reset_input()
+                parser = PacketParser(self.name)
+                step = 0
+            elif reply[0] == step:
+                if step == 2:
+                    self.identity = parse_sync2(reply, self.name)
+                step += 1
+            else:
+                step = 0
+
+    def _io_loop(self, transport: Transport) -> None:
+        parser = PacketParser(self.name)
+        last_byte = time.monotonic()
+        while not self._stop_io.is_set():
+            try:
+                # one byte with a timeout, then whatever else is there: low latency, no spin
+                data = transport.read(1, 0.02)
+                if data:
+                    data += transport.read(4096, 0.0)
+                now = time.monotonic()
+                if now - self._last_write >= self.pulse_period:
+                    self._write(command(Command.PULSE))
+            except DeviceError as exc:
+                with self._cond:
+                    self._lost = ConnectionLostError(
+                        self.name, "read the robot's packets", exc.seen,
+                        "check the cable; reconnect() opens the line again")
+                    self._cond.notify_all()
+                return
+            if data:
+                last_byte = now
+                parser.feed(data)
+            elif parser.partial and now - last_byte > INTER_BYTE_LIMIT:
+                try:
+                    parser.expire_partial()
+                except ProtocolError as exc:
+                    self._note_error(exc)
+            while True:
+                try:
+                    packet = parser.next()
+                except ProtocolError as exc:
+                    self._note_error(exc)
+                    continue
+                if packet is None:
+                    break
+                self._dispatch(packet, now)
+
+    def _dispatch(self, packet: bytes, now: float) -> None:
+        if is_sip(packet):
+            try:
+                sip = parse_sip(packet, self.name)
+            except ProtocolError as exc:
+                self._note_error(exc)
+                return
+            with self._cond:
+                if self._odometry is None:
+                    self._odometry = _Odometry(sip)
+                    self._anchor = (self._map_pose, self._odometry.pose)
+                else:
+                    self._odometry.update(sip)
+                self.last_sip, self._sip_time = sip, now
+                self.sip_count += 1
+                self._cond.notify_all()
+            return
+        for port, (_, _, kind) in AUX_PORTS.items():
+            if packet[0] == kind:
+                with self._cond:
+                    self._aux[port] += packet[1:]
+                    self._cond.notify_all()
+
+    # -- waiting on SIPs -----------------------------------------------------------------------
+    def _require_link(self, asked: str) -> None:
+        self.require_connected(asked)
+        if self._lost is not None:
+            if not self.auto_reconnect:
+                raise self._lost
+            try:
+                self.reconnect()
+            except DeviceError as exc:
+                raise ConnectionLostError(self.name, asked, f"the line was lost and reconnecting "
+                                          f"failed ({exc.seen})", "check the cable and the "
+                                          "robot's power") from None
+
+    def _await_sip(self, after: int, deadline: float, asked: str) -> Sip:
+        """The first SIP numbered above ``after``; typed errors on silence or a lost line."""
+        with self._cond:
+            while self.sip_count <= after or self.last_sip is None:
+                if self._lost is not None:
+                    raise self._lost
+                now = time.monotonic()
+                if now - self._sip_time > self.sip_timeout:
+                    raise DeviceTimeoutError(
+                        self.name, asked, f"no SIP from the robot for {self.sip_timeout:g} s",
+                        "check the cable, the robot's power and that nothing else holds the line")
+                if now >= deadline:
+                    raise DeviceTimeoutError(self.name, asked, "not finished in time",
+                                             "allow more time or check the path")
+                self._cond.wait(min(deadline - now, 0.05))
+            return self.last_sip
+
+    def _map_pose_now(self) -> Pose2D:
+        assert self._anchor is not None and self._odometry is not None
+        map_anchor, odom_anchor = self._anchor
+        return _compose(map_anchor, _relative(odom_anchor, self._odometry.pose))
+
+    def _odometry_heading(self, map_yaw: float) -> float:
+        """A map-frame yaw as a heading in the robot's odometry frame (rad)."""
+        assert self._anchor is not None
+        map_anchor, odom_anchor = self._anchor
+        return float(wrap_angle(map_yaw - map_anchor.yaw + odom_anchor.yaw))
+
+    # -- Base ---------------------------------------------------------------------------------
+    def pose(self) -> Pose2D:
+        self._require_link("read the pose")
+        with self._cond:
+            if self._lost is not None:
+                raise self._lost
+            if time.monotonic() - self._sip_time > self.sip_timeout:
+                raise DeviceTimeoutError(self.name, "read the pose", f"no SIP for "
+                                         f"{self.sip_timeout:g} s", "check the cable and power")
+            return self._map_pose_now()
+
+    def set_pose(self, pose: Pose2D) -> None:
+        self._require_link(f"set the pose to {_fmt(pose)}")
+        with self._cond:
+            assert self._odometry is not None
+            self._anchor = (pose, self._odometry.pose)
+            self._map_pose = pose
+
+    def stop(self) -> None:
+        self._require_link("stop")
+        self._write(command(Command.STOP))
+
+    def _check_fault(self, sip: Sip, asked: str) -> None:
+        fault = sip.fault()
+        if fault is not None:
+            with contextlib.suppress(DeviceError):
+                self._write(command(Command.STOP))
+            raise DeviceFaultError(self.name, asked, f"{fault} at odometry "
+                                   f"{_fmt(self._map_pose_now())}",
+                                   "clear the obstacle; choose a stop with a free path")
+
+    def _settle(self, deadline: float, asked: str) -> Pose2D:
+        """Wait until the firmware reports the motion done (a 'stopped' SIP generated after
+        the command), raising on faults, silence or the deadline."""
+        with self._cond:
+            seq = self.sip_count
+        while True:
+            sip = self._await_sip(seq, deadline, asked)
+            seq = self.sip_count
+            self._check_fault(sip, asked)
+            if seq >= self._settle_from and not sip.moving:
+                with self._cond:
+                    return self._map_pose_now()
+
+    def _command_then_settle(self, packet: bytes, deadline: float, asked: str) -> Pose2D:
+        with self._cond:
+            # SIPs in flight when the command goes out may predate it: skip two
+            self._settle_from = self.sip_count + 2
+        self._write(packet)
+        return self._settle(deadline, asked)
+
+    def _turn_to(self, map_yaw: float, deadline: float, asked: str) -> Pose2D:
+        degrees = round(math.degrees(self._odometry_heading(map_yaw))) % 360
+        return self._command_then_settle(command(Command.HEAD, degrees), deadline, asked)
+
+    def go_to(self, goal: Pose2D, *, timeout: float = 60.0) -> Pose2D:
+        asked = f"go to {_fmt(goal)}"
+        deadline = time.monotonic() + timeout
+        reconnects = 0
+        for _ in range(12):
+            self._require_link(asked)
+            try:
+                pose = self.pose()
+                dist = pose.distance_to(goal)
+                if dist > XY_TOLERANCE:
+                    bearing = math.atan2(goal.y - pose.y, goal.x - pose.x)
+                    if abs(wrap_angle(bearing - pose.yaw)) > YAW_TOLERANCE:
+                        pose = self._turn_to(bearing, deadline, asked)
+                    along = ((goal.x - pose.x) * math.cos(pose.yaw)
+                             + (goal.y - pose.y) * math.sin(pose.yaw))
+                    mm = max(-30000, min(30000, round(along * 1000.0)))
+                    self._command_then_settle(command(Command.MOVE, mm), deadline, asked)
+                elif abs(pose.heading_error_to(goal)) > YAW_TOLERANCE:
+                    self._turn_to(goal.yaw, deadline, asked)
+                else:
+                    return pose
+            except ConnectionLostError:
+                reconnects += 1
+                if not self.auto_reconnect or reconnects > 2:
+                    raise
+                self._require_link(asked)
+            except DeviceTimeoutError:
+                with contextlib.suppress(DeviceError):
+                    self._write(command(Command.STOP))
+                raise
+        pose = self.pose()
+        raise DeviceTimeoutError(self.name, asked, f"still {100 * pose.distance_to(goal):.1f} cm"
+                                 f" and {abs(math.degrees(pose.heading_error_to(goal))):.1f} deg "
+                                 "away after 12 corrections", "check wheel slip and the path")
+
+    def drive(self, speed: float, turn_rate: float, duration: float) -> Pose2D:
+        asked = f"drive {speed:.3f} m/s, {turn_rate:.3f} rad/s for {duration:g} s"
+        lim = self.limits
+        if not (abs(speed) <= lim.speed and abs(turn_rate) <= lim.turn_rate
+                and 0.0 <= duration <= 600.0):
+            raise OutOfRangeError(self.name, asked, f"limits are |speed| <= {lim.speed} m/s, "
+                                  f"|turn rate| <= {lim.turn_rate:.2f} rad/s, 0..600 s",
+                                  "use smaller values")
+        self._require_link(asked)
+        start = time.monotonic()
+        end = start + duration
+        with self._cond:
+            seq = self.sip_count
+        try:
+            self._write(command(Command.VEL, round(speed * 1000.0)))
+            self._write(command(Command.RVEL, round(math.degrees(turn_rate))))
+            while time.monotonic() < end:
+                sip = self._await_sip(seq, end + self.sip_timeout, asked)
+                seq = self.sip_count
+                if time.monotonic() - start > 0.25:  # SIPs from before VEL may still show a stall
+                    self._check_fault(sip, asked)
+        finally:
+            with contextlib.suppress(DeviceError):
+                self._write(command(Command.STOP))
+        return self._command_then_settle(command(Command.STOP), time.monotonic() + 5.0, asked)
+
+    # -- AUX port ------------------------------------------------------------------------------
+    def aux_transport(self, port: int = 1) -> ArcosAuxTransport:
+        """A ``Transport`` to the device on the robot's AUX ``port`` (1..3): writes go out in
+        TTY2 (TTY3/TTY4) packets, reads ask with GETAUX and collect SERAUX answers."""
+        if port not in AUX_PORTS:
+            raise OutOfRangeError(self.name, f"open AUX{port}", "no such port", "use 1, 2 or 3")
+        return ArcosAuxTransport(self, port)
+
+
+class ArcosAuxTransport:
+    """Bytes through the robot's AUX port. ARCOS answers GETAUX n only once n bytes have come
+    in (section A10), so a read asks for what it still needs and, when that goes unanswered
+    for ``probe`` seconds, for one byte at a time: short answers still get through."""
+
+    def __init__(self, base: ArcosBase, port: int, probe: float = 0.15) -> None:
+        self.base, self.port, self.probe = base, port, probe
+        self.name = f"{base.name} AUX{port}"
+        self._tty, self._getaux, _ = AUX_PORTS[port]
+        self._closed = False
+
+    def _check(self, asked: str) -> None:
+        if self._closed:
+            raise ConnectionLostError(self.name, asked, "the AUX transport is closed",
+                                      "take a new one from ArcosBase.aux_transport()")
+        self.base._require_link(asked)
+
+    def write(self, data: bytes) -> None:
+        self._check(f"write {len(data)} bytes")
+        for i in range(0, len(data), MAX_STRING):
+            self.base._write(command(self._tty, bytes(data[i:i + MAX_STRING])))
+
+    def _take(self, size: int) -> bytes:
+        buf = self.base._aux[self.port]
+        out = bytes(buf[:size])
+        del buf[:size]
+        return out
+
+    def read(self, size: int, timeout: float) -> bytes:
+        self._check(f"read {size} bytes")
+        base = self.base
+        end = time.monotonic() + timeout
+        with base._cond:
+            out = self._take(size)
+        one_at_a_time = False
+        while len(out) < size:
+            now = time.monotonic()
+            if now >= end:
+                break
+            want = 1 if one_at_a_time else min(size - len(out), MAX_STRING)
+            base._write(command(self._getaux, want))
+            with base._cond:
+                wait_end = min(end, now + self.probe)
+                while not base._aux[self.port] and base._lost is None:
+                    left = wait_end - time.monotonic()
+                    if left <= 0:
+                        break
+                    base._cond.wait(left)
+                if base._lost is not None:
+                    raise base._lost
+                got = self._take(size - len(out))
+            if got:
+                out += got
+            else:
+                one_at_a_time = True
+        return out
+
+    def reset_input(self) -> None:
+        self._check("flush")
+        self.base._write(command(self._getaux, 0))
+        with self.base._cond:
+            self.base._aux[self.port].clear()
+
+    def close(self) -> None:
+        self._closed = True
