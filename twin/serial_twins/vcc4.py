@@ -142,8 +142,8 @@ class VCC4Faults:
     silent: bool = False  # answer nothing and do nothing (camera unplugged)
 
 
-# Commands refused while a move, initialisation or power change runs.
-_MOTION = {codec.PAN_TILT, codec.HOME, codec.PEDESTAL_INIT, codec.POWER, codec.RANGE_SET, 0x60}
+# While a power change or initialisation runs everything else is busy; while the head moves,
+# the motion commands (absolute move, home, initialise) are.
 _ALWAYS = {codec.OPERATION_STATUS, codec.PRODUCT_NAME}  # answered even while busy
 _LOCAL_OK = _ALWAYS | {codec.CONTROL_MODE}
 _ZOOM_MAX = 0x085E  # the manual's example unit (A6)
