@@ -186,9 +186,28 @@ class ArcosBase(Base):
                                (Command.SETRA, math.degrees(lim.turn_accel)),
                                (Command.SETRA, -math.degrees(lim.turn_accel))):
                 self._write(command(cmd, round(value)))
+            self._await_motors(time.monotonic() + 2.0 * self.reply_timeout)
         except BaseException:
             self._stop_link()
             raise
+
+    def _await_motors(self, deadline: float) -> None:
+        """Wait for a SIP showing the motors enabled: ENABLE is not acknowledged otherwise."""
+        with self._cond:
+            seq = self.sip_count
+        while True:
+            try:
+                sip = self._await_sip(seq, deadline, "enable the motors")
+            except DeviceTimeoutError:
+                if self.sip_count > seq:  # SIPs come, but the motors stay off
+                    raise DeviceFaultError(
+                        self.name, "enable the motors", "the SIPs still show them off",
+                        "release the robot's STOP button and check the motor power "
+                        "switch") from None
+                raise
+            seq = self.sip_count
+            if sip.motors_enabled:
+                return
 
     def _stop_link(self) -> None:
         self._stop_io.set()

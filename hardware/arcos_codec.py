@@ -22,7 +22,7 @@ from twin.devices import ProtocolError
 HEADER = b"\xfa\xfb"
 ARGINT, ARGNINT, ARGSTR = 0x3B, 0x1B, 0x2B
 MAX_CLIENT_COUNT = 204  # ARCOS ignores client packets with a larger byte count (section B2)
-MAX_STRING = 200  # bytes of one string argument (ARCOS's GETAUX/TTY2 limit)
+MAX_STRING = 199  # bytes of one string argument: keeps the byte count within 204 (ARIA: 199)
 ANGLE_UNITS = 4096  # THPOS units per turn; the 0.001534 rad AngleConvFactor is 2*pi/4096
 RAD_PER_UNIT = 2.0 * math.pi / ANGLE_UNITS
 XY_BITS = 0x7FFF  # the SIP's x/y keep 15 bits and wrap (section B7)

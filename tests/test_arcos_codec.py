@@ -217,7 +217,7 @@ def test_frame_limits() -> None:
     with pytest.raises(ValueError):
         frame(b"")
     with pytest.raises(ValueError):
-        command(Command.TTY2, bytes(201))
+        command(Command.TTY2, bytes(200))
     with pytest.raises(ValueError):
         command(Command.VEL, 70000)
 

@@ -134,6 +134,11 @@ class KinematicActuator:
             self._advance()
             return self._pose
 
+    @property
+    def velocity(self) -> tuple[float, float]:
+        """The commanded (m/s, rad/s)."""
+        return self._vel
+
     def faults(self) -> DriveFaults:
         return DriveFaults(self.stalled, self.stalled, self.front_bumpers, 0)
 

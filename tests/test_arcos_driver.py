@@ -1,0 +1,215 @@
+"""The ARCOS driver against the emulated firmware over a real pseudo-terminal (kinematic
+actuator: no MuJoCo): handshake, odometry, motion, keep-alive, AUX tunnel, and the faults of
+issue 6 — junk, bad checksums, truncated packets, silence, a hung-up line."""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+
+from hardware.arcos import ArcosBase
+from twin.devices import (
+    ConnectionLostError,
+    DeviceFaultError,
+    DeviceTimeoutError,
+    NotConnectedError,
+    OutOfRangeError,
+)
+from twin.geometry import Pose2D
+from twin.serial_twins.arcos import ArcosServer, KinematicActuator, serve_arcos
+from twin.serial_twins.pty import PtyLink
+
+SCALE = 4.0  # the kinematic robot's clock runs this much faster than the wall
+
+
+class Echo:
+    def __init__(self) -> None:
+        self.pending = bytearray()
+
+    def receive(self, data: bytes, now: float) -> None:
+        self.pending += data
+
+    def transmit(self, now: float) -> bytes:
+        out, self.pending = bytes(self.pending), bytearray()
+        return out
+
+
+@pytest.fixture
+def server(tmp_path: Path) -> Iterator[ArcosServer]:
+    srv = serve_arcos(KinematicActuator(SCALE), PtyLink(tmp_path / "arcos"), aux1=Echo())
+    yield srv
+    srv.stop()
+
+
+def base_on(server: ArcosServer, **options: object) -> ArcosBase:
+    options = {"reply_timeout": 0.3, "sync_attempts": 4, "sip_timeout": 0.5, **options}
+    return ArcosBase.open(server.path, **options)  # type: ignore[arg-type]
+
+
+def odometry_in_map(server: ArcosServer, start: Pose2D) -> Pose2D:
+    x, y, th = server.emulator.actuator.odometry()
+    c, s = math.cos(start.yaw), math.sin(start.yaw)
+    return Pose2D(start.x + c * x - s * y, start.y + s * x + c * y, start.yaw + th)
+
+
+def test_connect_reports_identity_and_anchors_the_start(server: ArcosServer) -> None:
+    start = Pose2D(1.0, 2.0, math.pi / 2)
+    with base_on(server, start=start) as base:
+        assert base.identity == ("twin", "Pioneer", "peoplebot-sh")
+        pose = base.pose()
+        assert (pose.x, pose.y, pose.yaw) == pytest.approx((1.0, 2.0, math.pi / 2), abs=2e-3)
+        assert base.last_sip.motors_enabled and base.last_sip.battery == pytest.approx(12.6)
+        assert server.emulator.max_vel == 500.0  # SETV from the driver's limits
+    assert server.emulator.state == "waiting"  # CLOSE on exit
+    assert server.emulator.commands[-1] == (2, 1)
+
+
+def test_use_before_connect_is_a_typed_error(server: ArcosServer) -> None:
+    with pytest.raises(NotConnectedError):
+        base_on(server).pose()
+
+
+def test_drive_moves_the_robot_and_the_pose_tracks_its_odometry(server: ArcosServer) -> None:
+    start = Pose2D(0.5, 0.5, 0.0)
+    with base_on(server, start=start) as base:
+        pose = base.drive(0.1, math.radians(20), 1.0)
+        truth = odometry_in_map(server, start)
+        assert pose.distance_to(truth) < 0.005
+        assert abs(pose.heading_error_to(truth)) < math.radians(0.3)
+        assert pose.distance_to(start) > 0.2  # ~0.1 m/s x 1 s x SCALE
+        assert server.emulator.actuator.velocity == (0.0, 0.0)
+        with pytest.raises(OutOfRangeError):
+            base.drive(3.0, 0.0, 1.0)
+
+
+def test_go_to_ends_within_5_cm_and_3_degrees(server: ArcosServer) -> None:
+    start = Pose2D(1.0, 1.0, 0.0)
+    with base_on(server, start=start) as base:
+        for goal in (Pose2D(2.0, 1.5, math.pi / 2), Pose2D(1.2, 0.4, -2.5),
+                     Pose2D(1.21, 0.41, 1.0)):
+            pose = base.go_to(goal, timeout=20.0)
+            truth = odometry_in_map(server, start)
+            for p in (pose, truth):
+                assert p.distance_to(goal) < 0.05
+                assert abs(p.heading_error_to(goal)) < math.radians(3.0)
+
+
+def test_set_pose_reanchors_without_moving(server: ArcosServer) -> None:
+    with base_on(server) as base:
+        base.set_pose(Pose2D(3.0, 4.0, 1.0))
+        pose = base.pose()
+        assert (pose.x, pose.y, pose.yaw) == pytest.approx((3.0, 4.0, 1.0), abs=2e-3)
+        base.drive(0.1, 0.0, 0.5)
+        pose = base.pose()
+        assert pose.x > 3.0 and pose.y > 4.0  # forward along yaw 1 rad
+
+
+def test_keepalive_holds_the_watchdog_off(server: ArcosServer) -> None:
+    with base_on(server) as base:
+        time.sleep(2.6)
+        assert not server.emulator.watchdog_tripped
+        assert base.pose() is not None
+
+
+def test_robot_left_open_by_a_crashed_client_is_closed_and_resynced(
+        server: ArcosServer) -> None:
+    crashed = base_on(server)
+    crashed.connect()
+    crashed._stop_link()  # a client that dies without CLOSE
+    assert server.emulator.state == "open"
+    with base_on(server) as base:
+        assert base.still_open_recoveries >= 1
+        assert base.identity is not None and base.pose() is not None
+
+
+def test_junk_bad_checksums_and_truncated_packets_are_survived(server: ArcosServer) -> None:
+    with base_on(server) as base:
+        faults = server.emulator.faults
+        faults.junk = b"WMS2\r\xfa\x00garbage"
+        faults.bad_checksum = 3
+        time.sleep(0.6)
+        faults.truncate = 2
+        time.sleep(0.6)
+        assert base.protocol_errors >= 5
+        count = base.sip_count
+        pose = base.drive(0.1, 0.0, 0.5)
+        assert base.sip_count > count and pose.x > 0.1
+
+
+def test_a_robot_that_stops_answering_is_a_timeout_not_a_hang(server: ArcosServer) -> None:
+    with base_on(server) as base:
+        server.emulator.faults.mute = True
+        t0 = time.monotonic()
+        with pytest.raises(DeviceTimeoutError, match="no SIP"):
+            base.go_to(Pose2D(1.0, 0.0, 0.0), timeout=30.0)
+        assert time.monotonic() - t0 < 2.0
+        with pytest.raises(DeviceTimeoutError):
+            base.pose()
+
+
+def test_handshake_with_a_silent_robot_times_out(server: ArcosServer) -> None:
+    server.emulator.faults.mute = True
+    base = base_on(server, reply_timeout=0.2, sync_attempts=3)
+    t0 = time.monotonic()
+    with pytest.raises(DeviceTimeoutError, match="SYNC0"):
+        base.connect()
+    assert time.monotonic() - t0 < 1.5 and not base.is_connected
+
+
+def test_stall_during_motion_is_a_fault(server: ArcosServer) -> None:
+    with base_on(server) as base:
+        server.emulator.actuator.stalled = True
+        with pytest.raises(DeviceFaultError, match="stalled"):
+            base.drive(0.1, 0.0, 2.0)
+        server.emulator.actuator.stalled = False
+        server.emulator.actuator.front_bumpers = 0b100
+        with pytest.raises(DeviceFaultError, match="front bumpers"):
+            base.go_to(Pose2D(1.0, 0.0, 0.0))
+
+
+def test_hangup_mid_use_reconnects_through_the_still_open_handshake(
+        server: ArcosServer) -> None:
+    start = Pose2D(1.0, 1.0, 0.0)
+    with base_on(server, start=start) as base:
+        base.drive(0.1, 0.0, 0.5)
+        before = base.pose()
+        server.hangup()
+        time.sleep(0.2)
+        pose = base.go_to(Pose2D(2.0, 1.0, 0.0), timeout=20.0)
+        assert base.reconnects == 1 and base.still_open_recoveries >= 1
+        assert pose.distance_to(Pose2D(2.0, 1.0, 0.0)) < 0.05
+        assert before.x > 1.1
+
+
+def test_hangup_without_auto_reconnect_is_connection_lost(server: ArcosServer) -> None:
+    with base_on(server, auto_reconnect=False) as base:
+        server.hangup()
+        time.sleep(0.2)
+        with pytest.raises(ConnectionLostError):
+            base.pose()
+        with pytest.raises(ConnectionLostError):
+            base.go_to(Pose2D(1.0, 0.0, 0.0))
+
+
+def test_aux_tunnel_round_trip(server: ArcosServer) -> None:
+    with base_on(server) as base:
+        aux = base.aux_transport()
+        aux.write(b"\xff\x30\x30\x00\x63\xef")
+        assert aux.read(6, 1.0) == b"\xff\x30\x30\x00\x63\xef"
+        big = bytes(range(256)) * 2  # more than one TTY2 / GETAUX packet
+        aux.write(big)
+        assert aux.read(len(big), 3.0) == big
+        aux.write(b"abc")  # a shorter answer than asked for still gets through
+        t0 = time.monotonic()
+        assert aux.read(6, 0.8) == b"abc"
+        assert 0.7 < time.monotonic() - t0 < 1.5
+        aux.write(b"stale")
+        time.sleep(0.1)
+        aux.reset_input()
+        aux.write(b"new")
+        assert aux.read(3, 1.0) == b"new"
+        assert aux.read(1, 0.2) == b""
