@@ -182,7 +182,7 @@ class Clock:
 def _emulator(**options: object) -> tuple[VCC4Emulator, Clock, KinematicHead]:
     clock = Clock()
     head = KinematicHead(clock)
-    timing = VCC4Timing(latency=0.010, power_seconds=4.0, init_seconds=2.5)
+    timing = VCC4Timing(latency=0.010, baud=0, power_seconds=4.0, init_seconds=2.5)
     return VCC4Emulator(head, timing=timing, **options), clock, head  # type: ignore[arg-type]
 
 
@@ -296,7 +296,8 @@ class LoopTransport:
 
 
 def _fast_timing() -> VCC4Timing:
-    return VCC4Timing(latency=0.003, power_seconds=0.1, init_seconds=0.1, zoom_rate=20000)
+    return VCC4Timing(latency=0.003, baud=0, power_seconds=0.1, init_seconds=0.1,
+                      zoom_rate=20000)
 
 
 def _driver(chunk: int = 1000, **options: object) -> tuple[VCC4, VCC4Emulator, LoopTransport]:

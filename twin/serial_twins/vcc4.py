@@ -123,9 +123,11 @@ class KinematicHead:
 @dataclass
 class VCC4Timing:
     """Seconds (wall clock): answer latency (manual: 10 ms typical), how long camera power
-    changes and pedestal initialisation keep the camera busy (A7), zoom speed in counts/s."""
+    changes and pedestal initialisation keep the camera busy (A7), zoom speed in counts/s; an
+    answer also takes its bytes' time on the line at ``baud`` (10 bits a byte; 0: instant)."""
 
     latency: float = 0.010
+    baud: int = 9600
     power_seconds: float = 4.0
     init_seconds: float = 2.5
     zoom_rate: float = 1000.0
@@ -202,9 +204,9 @@ class VCC4Emulator:
                     continue  # wrong device number: silently ignored (A4)
                 self.received.append(command)
                 flags, status = self._execute(command, now)
-                self._outbox.append((now + self.timing.latency,
-                                     self._faulty(codec.answer_frame(flags, status,
-                                                                      self.device))))
+                answer = self._faulty(codec.answer_frame(flags, status, self.device))
+                on_line = 10 * len(answer) / self.timing.baud if self.timing.baud else 0.0
+                self._outbox.append((now + self.timing.latency + on_line, answer))
 
     def transmit(self, now: float) -> bytes:
         with self._lock:
