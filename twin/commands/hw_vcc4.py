@@ -25,7 +25,8 @@ def register(hw_subparsers: argparse._SubParsersAction) -> None:
                         "path printed by 'twin serve-hardware')")
     parser.add_argument("--via-aux", action="store_true",
                         help="the camera hangs off the robot's AUX1: open the ARCOS base on PORT")
-    parser.add_argument("--baud", type=int, default=9600, help="baud rate (default 9600)")
+    parser.add_argument("--baud", type=int, default=9600,
+                        help="baud rate of PORT (the camera, or the base with --via-aux; 9600)")
     parser.add_argument("--timeout", type=float, default=20.0,
                         help="seconds to wait for a move or zoom (default 20)")
     sub = parser.add_subparsers(dest="vcc4_action", metavar="ACTION", required=True)
