@@ -116,8 +116,9 @@ class ArcosBase(Base):
                  start: Pose2D = ORIGIN, limits: ArcosLimits = ArcosLimits(),
                  reply_timeout: float = 1.0, sync_attempts: int = 6, sip_timeout: float = 1.0,
                  pulse_period: float = 0.5, auto_reconnect: bool = True,
-                 reconnect_timeout: float = 5.0) -> None:
+                 reconnect_timeout: float = 5.0, enable_motors: bool = True) -> None:
         self.name = name
+        self.enable_motors = enable_motors
         self._open_transport = open_transport
         self.limits = limits
         self.reply_timeout, self.sync_attempts = reply_timeout, sync_attempts
@@ -179,14 +180,16 @@ class ArcosBase(Base):
             self._io.start()
             self._await_sip(first, time.monotonic() + 2.0 * self.reply_timeout, "open the robot")
             lim = self.limits
-            for cmd, value in ((Command.ENABLE, 1), (Command.SETV, lim.speed * 1000.0),
+            for cmd, value in ((Command.ENABLE, int(self.enable_motors)),
+                               (Command.SETV, lim.speed * 1000.0),
                                (Command.SETA, lim.accel * 1000.0),
                                (Command.SETA, -lim.accel * 1000.0),
                                (Command.SETRV, math.degrees(lim.turn_rate)),
                                (Command.SETRA, math.degrees(lim.turn_accel)),
                                (Command.SETRA, -math.degrees(lim.turn_accel))):
                 self._write(command(cmd, round(value)))
-            self._await_motors(time.monotonic() + 2.0 * self.reply_timeout)
+            if self.enable_motors:
+                self._await_motors(time.monotonic() + 2.0 * self.reply_timeout)
         except BaseException:
             self._stop_link()
             raise

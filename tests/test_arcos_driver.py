@@ -213,3 +213,19 @@ def test_aux_tunnel_round_trip(server: ArcosServer) -> None:
         aux.write(b"new")
         assert aux.read(3, 1.0) == b"new"
         assert aux.read(1, 0.2) == b""
+
+
+def test_cli_status_and_drive(server: ArcosServer, capsys: pytest.CaptureFixture[str]) -> None:
+    from twin.cli import main
+
+    assert main(["hw", "arcos", "--port", server.path, "status"]) == 0
+    out = capsys.readouterr().out
+    assert "robot: twin  class: Pioneer  subclass: peoplebot-sh" in out
+    assert "battery: 12.6 V" in out and "stall/bumpers: clear" in out
+    assert not server.emulator.motors_enabled
+    assert main(["hw", "arcos", "--port", server.path, "drive", "--vel", "100", "--rvel", "0",
+                 "--seconds", "0.5"]) == 0
+    assert "drove" in capsys.readouterr().out
+    assert server.emulator.actuator.odometry()[0] > 0.1
+    assert main(["hw", "arcos", "--port", server.path + ".missing", "status"]) == 2
+    assert "no such port" in capsys.readouterr().err

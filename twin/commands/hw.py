@@ -10,6 +10,7 @@ import importlib
 
 HW_MODULES: tuple[str, ...] = (
     "twin.commands.hw_vcc4",
+    "twin.commands.hw_arcos",
 )
 
 
