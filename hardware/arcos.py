@@ -168,9 +168,11 @@ class ArcosBase(Base):
     def _start_link(self) -> None:
         transport = self._open_transport()
         self._transport, self._lost = transport, None
+        opened = False
         try:
             self._handshake(transport)
             self._write(command(Command.OPEN, 1))
+            opened = True
             with self._cond:
                 self._odometry = None
                 first, self._sip_time = self.sip_count, time.monotonic()
@@ -191,18 +193,22 @@ class ArcosBase(Base):
             if self.enable_motors:
                 self._await_motors(time.monotonic() + 2.0 * self.reply_timeout)
         except BaseException:
+            if opened and self._lost is None:  # leave no robot open behind a failed connect
+                with contextlib.suppress(DeviceError):
+                    self._write(command(Command.STOP))
+                    self._write(command(Command.CLOSE, 1))
             self._stop_link()
             raise
 
     def _await_motors(self, deadline: float) -> None:
         """Wait for a SIP showing the motors enabled: ENABLE is not acknowledged otherwise."""
         with self._cond:
-            seq = self.sip_count
+            seq = first = self.sip_count
         while True:
             try:
                 sip = self._await_sip(seq, deadline, "enable the motors")
             except DeviceTimeoutError:
-                if self.sip_count > seq:  # SIPs come, but the motors stay off
+                if self.sip_count > first:  # SIPs come, but the motors stay off
                     raise DeviceFaultError(
                         self.name, "enable the motors", "the SIPs still show them off",
                         "release the robot's STOP button and check the motor power "

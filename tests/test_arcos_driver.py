@@ -229,3 +229,18 @@ def test_cli_status_and_drive(server: ArcosServer, capsys: pytest.CaptureFixture
     assert server.emulator.actuator.odometry()[0] > 0.1
     assert main(["hw", "arcos", "--port", server.path + ".missing", "status"]) == 2
     assert "no such port" in capsys.readouterr().err
+
+
+def test_failed_connect_leaves_the_robot_closed(server: ArcosServer) -> None:
+    server.emulator.actuator.odometry()  # the robot is there, but its motors stay off:
+    original = server.emulator._handle
+
+    def refuse_enable(number: int, arg: object, now: float) -> None:
+        if number != 4:  # ENABLE
+            original(number, arg, now)  # type: ignore[arg-type]
+
+    server.emulator._handle = refuse_enable  # type: ignore[method-assign]
+    with pytest.raises(DeviceFaultError, match="STOP button"):
+        base_on(server).connect()
+    time.sleep(0.1)
+    assert server.emulator.state == "waiting"

@@ -1,0 +1,100 @@
+"""ARCOS through a pseudo-terminal: the SIP rate the driver receives and command round trips.
+
+    python benchmarks/bench_arcos.py [--seconds 10] [--trips 50] [--time-scale 1]
+
+The real driver (``hardware.arcos.ArcosBase``) talks to the emulated firmware on a pty while
+the emulator drives the MuJoCo robot (world stepped in wall-clock time x ``--time-scale``), and
+the robot drives a slow circle so SIPs carry changing odometry. Measured:
+
+* SIP rate: SIPs/s the driver decoded over ``--seconds`` (the firmware sends one per 100 ms).
+* AUX round trip: 6 bytes out in a TTY2 packet to an echo device on AUX1, back through GETAUX
+  and a SERAUX packet: what every VC-C4 command pays when the camera hangs off the robot.
+* Command to SIP: VEL sent until the first SIP showing the robot moving (ARCOS does not
+  acknowledge commands, so the SIP stream is the answer; includes up to one 100 ms SIP cycle).
+
+Figures depend on the CPU and on what else runs on it.
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+import time
+
+from hardware.arcos import ArcosBase
+from hardware.arcos_codec import Command
+from twin.serial_twins.arcos import serve_arcos
+from twin.serial_twins.runner import WorldRunner
+from twin.sim import make_sim_robot
+
+
+class Echo:
+    """AUX1 device that sends back what it gets."""
+
+    def __init__(self) -> None:
+        self.pending = bytearray()
+
+    def receive(self, data: bytes, now: float) -> None:
+        self.pending += data
+
+    def transmit(self, now: float) -> bytes:
+        out, self.pending = bytes(self.pending), bytearray()
+        return out
+
+
+def _ms(values: list[float]) -> str:
+    values = sorted(values)
+    p95 = values[min(len(values) - 1, int(0.95 * len(values)))]
+    return (f"median {1000 * statistics.median(values):.1f} ms, p95 {1000 * p95:.1f} ms, "
+            f"max {1000 * values[-1]:.1f} ms (n={len(values)})")
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--seconds", type=float, default=10.0)
+    parser.add_argument("--trips", type=int, default=50)
+    parser.add_argument("--time-scale", type=float, default=1.0)
+    args = parser.parse_args()
+
+    sim, _ = make_sim_robot("living_room")
+    with WorldRunner(sim, args.time_scale):
+        server = serve_arcos(sim, aux1=Echo())
+        with ArcosBase.open(server.path) as base:
+            base.send(Command.RVEL, 10)
+            base.send(Command.VEL, 50)
+            count, t0 = base.sip_count, time.monotonic()
+            time.sleep(args.seconds)
+            rate = (base.sip_count - count) / (time.monotonic() - t0)
+            print(f"SIP rate through the pty: {rate:.2f} SIPs/s over {args.seconds:g} s "
+                  f"(firmware cycle 100 ms; {base.protocol_errors} protocol errors)")
+            base.stop()
+            time.sleep(0.5)
+
+            aux = base.aux_transport()
+            trips = []
+            for _ in range(args.trips):
+                t = time.perf_counter()
+                aux.write(b"\xff\x30\x30\x00\x63\xef")
+                assert len(aux.read(6, 1.0)) == 6
+                trips.append(time.perf_counter() - t)
+            print(f"AUX round trip (TTY2 6 bytes -> echo -> GETAUX/SERAUX): {_ms(trips)}")
+
+            latencies = []
+            for i in range(min(args.trips, 20)):
+                time.sleep(0.35)  # let the robot stop
+                seq = base.sip_count
+                t = time.perf_counter()
+                base.send(Command.VEL, 100 if i % 2 else -100)
+                while True:
+                    sip = base._await_sip(seq, time.monotonic() + 2.0, "bench")
+                    seq = base.sip_count
+                    if sip.moving:
+                        break
+                latencies.append(time.perf_counter() - t)
+                base.send(Command.STOP)
+            print(f"VEL -> first SIP showing motion: {_ms(latencies)}")
+        server.stop()
+
+
+if __name__ == "__main__":
+    main()
