@@ -15,6 +15,7 @@ count (0 = wide end).
 from __future__ import annotations
 
 import math
+import threading
 import time
 from collections.abc import Callable
 
@@ -33,6 +34,11 @@ from twin.devices import (
     PanTiltLimits,
     ProtocolError,
 )
+
+try:
+    from termios import error as _TermiosError
+except ImportError:  # no termios (Windows): pyserial raises only SerialException there
+    _TermiosError = OSError
 
 NAME = "VC-C4"
 # Tilt range sent at initialisation: the camera keeps +-30 degrees until told (A6); this is the
@@ -73,6 +79,7 @@ class VCC4(PanTilt):
         self.init_timeout, self.poll_interval = init_timeout, poll_interval
         self.tolerance = tolerance
         self._parser = codec.AnswerParser(name)
+        self._lock = threading.RLock()  # one command in flight, whichever thread asks
         self._connected = False
         self._speeds: tuple[int, int] | None = None  # pan, tilt counts/s last set
         self.zoom_max: int | None = None
@@ -291,6 +298,11 @@ class VCC4(PanTilt):
         Busy answers are resent for up to ``busy_timeout`` seconds; a lost, truncated or
         garbled answer is resent ``retries`` times (every command we send is idempotent), then
         raised. A vanished serial port is reopened once if this driver opened it."""
+        with self._lock:
+            return self._exchange_locked(frame, asked, expected, busy_timeout, retries)
+
+    def _exchange_locked(self, frame: bytes, asked: str, expected: int,
+                         busy_timeout: float | None, retries: int | None) -> codec.Answer:
         busy_until = time.monotonic() + (self.busy_timeout if busy_timeout is None
                                          else busy_timeout)
         attempts = self.retries if retries is None else retries
@@ -323,7 +335,13 @@ class VCC4(PanTilt):
         transport = self._transport
         if transport is None:
             raise ConnectionLostError(self.name, asked, "the port is closed", "connect again")
-        transport.reset_input()  # a late answer to an earlier command is not this one's
+        try:
+            transport.reset_input()  # a late answer to an earlier command is not this one's
+        except _TermiosError as exc:
+            # pyserial lets tcflush's termios.error through when the line went away (a pty
+            # whose other end closed): that is a lost connection, not a crash
+            raise ConnectionLostError(self.name, asked, f"the line went away ({exc})",
+                                      "check that the camera is plugged in") from None
         self._parser.clear()
         transport.write(frame)
         deadline = time.monotonic() + self.answer_timeout

@@ -504,6 +504,7 @@ class VCC4Server:
 
     def __init__(self, emulator: VCC4Emulator, link: PtyLink) -> None:
         self.emulator, self.link = emulator, link
+        self._link_lock = threading.Lock()  # a hangup must not close the fds under a read
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, name="vcc4-pty", daemon=True)
 
@@ -521,22 +522,25 @@ class VCC4Server:
         while not self._stop.is_set():
             due = emulator.next_due()
             wait = 0.05 if due is None else min(0.05, max(0.0, due - time.monotonic()))
-            data = link.read(256, wait)
-            if data:
-                emulator.receive(data, time.monotonic())
-            out = emulator.transmit(time.monotonic())
-            if out:
-                link.write(out)
+            with self._link_lock:
+                data = link.read(256, wait)
+                if data:
+                    emulator.receive(data, time.monotonic())
+                out = emulator.transmit(time.monotonic())
+                if out:
+                    link.write(out)
 
     def hangup(self) -> None:
         """Unplug and replug: the pseudo-terminal is replaced (the link path follows)."""
-        self.link.hangup()
+        with self._link_lock:
+            self.link.hangup()
 
     def stop(self) -> None:
         self._stop.set()
         if self._thread.is_alive():
             self._thread.join(timeout=2.0)
-        self.link.close()
+        with self._link_lock:
+            self.link.close()
 
     def __enter__(self) -> VCC4Server:
         return self
