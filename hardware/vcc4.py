@@ -58,7 +58,8 @@ class VCC4(PanTilt):
     Timing knobs (seconds): ``answer_timeout`` per answer (the manual's 300 ms plus margin, as
     ARIA), ``busy_timeout`` for retrying ordinary busy answers, ``power_timeout`` and
     ``init_timeout`` for the busy spells after camera-on and pedestal initialisation,
-    ``poll_interval`` between position polls while moving.
+    ``poll_interval`` between status polls while moving; ``retries`` resends after a lost,
+    truncated or garbled answer; ``tolerance`` (rad) how close a finished move must be.
     """
 
     name = NAME

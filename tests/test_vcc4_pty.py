@@ -132,6 +132,8 @@ def _numbers(text: str) -> list[float]:
 
 
 def test_cli_goto_and_position(server: VCC4Server, capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["hw", "vcc4", "--port", server.path, "init"]) == 0
+    assert capsys.readouterr().out.startswith("initialised")
     assert main(["hw", "vcc4", "--port", server.path, "goto", "25", "-5"]) == 0
     assert _numbers(capsys.readouterr().out) == pytest.approx([25.0, -5.0], abs=0.1)
     assert main(["hw", "vcc4", "--port", server.path, "zoom", "500"]) == 0
