@@ -114,7 +114,7 @@ class ArcosBase(Base):
 
     def __init__(self, open_transport: Callable[[], Transport], *, name: str = "ARCOS base",
                  start: Pose2D = ORIGIN, limits: ArcosLimits = ArcosLimits(),
-                 reply_timeout: float = 1.0, sync_attempts: int = 6, sip_timeout: float = 1.0,
+                 reply_timeout: float = 1.0, sync_attempts: int = 6, sip_timeout: float = 2.0,
                  pulse_period: float = 0.5, auto_reconnect: bool = True,
                  reconnect_timeout: float = 5.0, enable_motors: bool = True) -> None:
         self.name = name
@@ -123,6 +123,7 @@ class ArcosBase(Base):
         self.limits = limits
         self.reply_timeout, self.sync_attempts = reply_timeout, sync_attempts
         self.sip_timeout, self.pulse_period = sip_timeout, pulse_period
+        self.sip_period_limit = 0.3  # s: a pose older than three SIP cycles is refreshed first
         self.auto_reconnect, self.reconnect_timeout = auto_reconnect, reconnect_timeout
         self._transport: Transport | None = None
         self._cond = threading.Condition()
@@ -401,12 +402,15 @@ class ArcosBase(Base):
 
     def _await_sip(self, after: int, deadline: float, asked: str) -> Sip:
         """The first SIP numbered above ``after``; typed errors on silence or a lost line."""
+        began = time.monotonic()
         with self._cond:
             while self.sip_count <= after or self.last_sip is None:
                 if self._lost is not None:
                     raise self._lost
                 now = time.monotonic()
-                if now - self._sip_time > self.sip_timeout:
+                # silence counts from when we began waiting too: a reader thread starved of
+                # the GIL by a long computation gets a full timeout to catch up
+                if now - max(self._sip_time, began) > self.sip_timeout:
                     raise DeviceTimeoutError(
                         self.name, asked, f"no SIP from the robot for {self.sip_timeout:g} s",
                         "check the cable, the robot's power and that nothing else holds the line")
@@ -431,11 +435,13 @@ class ArcosBase(Base):
     def pose(self) -> Pose2D:
         self._require_link("read the pose")
         with self._cond:
+            stale = time.monotonic() - self._sip_time > self.sip_period_limit
+            seq = self.sip_count
+        if stale:  # the pose must be current: wait for the next SIP (or a typed error)
+            self._await_sip(seq, time.monotonic() + self.sip_timeout, "read the pose")
+        with self._cond:
             if self._lost is not None:
                 raise self._lost
-            if time.monotonic() - self._sip_time > self.sip_timeout:
-                raise DeviceTimeoutError(self.name, "read the pose", f"no SIP for "
-                                         f"{self.sip_timeout:g} s", "check the cable and power")
             return self._map_pose_now()
 
     def set_pose(self, pose: Pose2D) -> None:
