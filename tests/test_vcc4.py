@@ -196,17 +196,20 @@ def _ask(emulator: VCC4Emulator, clock: Clock, frame: bytes) -> bytes:
 def test_emulator_walks_through_the_init_sequence() -> None:
     emu, clock, head = _emulator(camera_on=False)
     ack = codec.answer_frame()
-    mode_error = H("FE 30 30 39 30 EF")
+    mode_error, busy = H("FE 30 30 39 30 EF"), H("FE 30 30 31 30 EF")
     assert _ask(emu, clock, codec.pan_tilt(100, 0)) == mode_error  # local mode
     assert _ask(emu, clock, codec.operation_status(True)) == codec.answer_frame(0, b"40030")
     assert _ask(emu, clock, codec.host_control()) == ack
     assert _ask(emu, clock, codec.pedestal_init()) == mode_error  # camera off
     assert _ask(emu, clock, codec.power(True)) == ack
-    assert _ask(emu, clock, codec.pedestal_init()) == H("FE 30 30 31 30 EF")  # powering on
+    assert _ask(emu, clock, codec.pedestal_init()) == busy  # powering on
     clock.t += 4.0
     assert _ask(emu, clock, codec.pan_tilt(100, 0)) == mode_error  # pedestal not initialised
+    assert _ask(emu, clock, codec.pedestal_init()) == busy  # it runs Initialize 2 by itself
+    clock.t += 2.5
+    assert _ask(emu, clock, codec.operation_status(True)) == codec.answer_frame(0, b"00000")
     assert _ask(emu, clock, codec.pedestal_init()) == ack
-    assert _ask(emu, clock, codec.pan_speed(800)) == H("FE 30 30 31 30 EF")  # calibrating
+    assert _ask(emu, clock, codec.pan_speed(800)) == busy  # calibrating
     clock.t += 2.5
     assert _ask(emu, clock, codec.pan_speed(400)) == ack
     assert _ask(emu, clock, codec.tilt_range(-267, 800)) == ack
@@ -215,7 +218,7 @@ def test_emulator_walks_through_the_init_sequence() -> None:
     assert _ask(emu, clock, codec.pan_tilt(-400, 700)) == ack  # wire pan negative = left
     assert head.commands[-1][0] == pytest.approx(math.radians(45.0))
     assert head.commands[-1][2] == pytest.approx(math.radians(45.0))
-    assert _ask(emu, clock, codec.pan_tilt(0, 0)) == H("FE 30 30 31 30 EF")
+    assert _ask(emu, clock, codec.pan_tilt(0, 0)) == busy
     assert _ask(emu, clock, codec.operation_status()) == codec.answer_frame(0, b"A00")
     clock.t += 10.0
     assert _ask(emu, clock, codec.pan_tilt_request()) == codec.answer_frame(0, b"7E7082BC")
@@ -244,6 +247,20 @@ def test_emulator_is_silent_for_other_devices_and_drops_early_commands() -> None
     clock.t += 0.05
     assert emu.transmit(clock.t) == codec.answer_frame(0, b"80008000")  # zoom request dropped
     assert emu.received[-1].code == codec.PAN_TILT_REQUEST
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.lists(st.one_of(st.binary(max_size=30), st.sampled_from([
+    codec.pan_tilt(100, -50), codec.pan_tilt_request(), codec.host_control(), codec.power(True),
+    codec.pedestal_init(), codec.zoom(5), codec.operation_status(True)])), max_size=12))
+def test_emulator_fuzz_answers_only_well_formed_frames(chunks: list[bytes]) -> None:
+    emu, clock, _ = _emulator()
+    parser = codec.AnswerParser()
+    for data in chunks:
+        emu.receive(data, clock.t)
+        clock.t += 0.05
+        parser.feed(emu.transmit(clock.t))
+        assert _drain(parser)[1] == 0  # whatever came in, what goes out parses
 
 
 def test_emulator_faults() -> None:
@@ -374,6 +391,9 @@ def test_driver_reinitialises_after_a_mode_error_and_bounds_busy_retries() -> No
         emulator.host_mode = False  # the camera was switched to local control
         camera.move_to(math.radians(10))
         assert emulator.host_mode
+        emulator.pedestal_ready = False  # a power blip: the camera lost its calibration
+        pan, _ = camera.move_to(math.radians(-10))
+        assert emulator.pedestal_ready and pan == pytest.approx(math.radians(-10), abs=2e-3)
         emulator.timing.init_seconds = 5.0
         emulator.receive(codec.pedestal_init(), time.monotonic())  # someone recalibrates
         time.sleep(0.01)

@@ -278,9 +278,10 @@ class VCC4Emulator:
     def _execute(self, cmd: codec.Command, now: float) -> tuple[int, bytes]:
         code, p = cmd.code, cmd.params
         busy = codec.FLAG_BUSY
+        running = self._busy(now)  # first: a finished initialisation shows in the status
         if not self.host_mode and code not in _LOCAL_OK:
             return codec.FLAG_MODE | busy, b""
-        if code not in _ALWAYS and self._busy(now):
+        if code not in _ALWAYS and running:
             return busy, b""
         handler = _HANDLERS.get(code)
         if handler is None:
@@ -290,8 +291,12 @@ class VCC4Emulator:
         except ValueError:  # wrong length, not hex, out of range
             return codec.FLAG_PARAMETER | busy, b""
 
-    def _needs_pedestal(self) -> tuple[int, bytes] | None:
-        if not self.camera_on or not self.pedestal_ready:
+    def _needs_pedestal(self, now: float) -> tuple[int, bytes] | None:
+        if not self.camera_on:
+            return codec.FLAG_MODE | codec.FLAG_BUSY, b""
+        if not self.pedestal_ready:
+            # the manual (p30-52): a mode error, and the camera runs Pedestal Initialize 2
+            self._start_init(now, home=False)
             return codec.FLAG_MODE | codec.FLAG_BUSY, b""
         if not self.head.settled():
             return codec.FLAG_BUSY, b""
@@ -318,6 +323,10 @@ class VCC4Emulator:
             return codec.FLAG_MODE | codec.FLAG_BUSY, b""
         if not self.head.settled():
             return codec.FLAG_BUSY, b""
+        self._start_init(now, home)
+        return 0, b""
+
+    def _start_init(self, now: float, home: bool) -> None:
         back = self._position_counts()
         self.pedestal_ready = False
         self._busy_until = now + self.timing.init_seconds
@@ -329,11 +338,10 @@ class VCC4Emulator:
             self.pedestal_ready = True
 
         self._after_busy = done
-        return 0, b""
 
     def _cmd_home(self, p: bytes, now: float) -> tuple[int, bytes]:
         _length(p, 0)
-        if (refused := self._needs_pedestal()) is not None:
+        if (refused := self._needs_pedestal(now)) is not None:
             return refused
         self._move(0, 0)
         return 0, b""
@@ -382,7 +390,7 @@ class VCC4Emulator:
     def _cmd_pan_tilt(self, p: bytes, now: float) -> tuple[int, bytes]:
         _length(p, 8)
         pan, tilt = codec.decode_pan_tilt(p)
-        if (refused := self._needs_pedestal()) is not None:
+        if (refused := self._needs_pedestal(now)) is not None:
             return refused
         if not (self.pan_range[0] <= pan <= self.pan_range[1]
                 and self.tilt_range[0] <= tilt <= self.tilt_range[1]):
