@@ -244,3 +244,20 @@ def test_failed_connect_leaves_the_robot_closed(server: ArcosServer) -> None:
         base_on(server).connect()
     time.sleep(0.1)
     assert server.emulator.state == "waiting"
+
+
+def test_sip_x_wraparound_is_unwrapped_into_continuous_odometry() -> None:
+    """Start 5 cm short of the 15-bit x wrap (32.767 m): the SIP's x jumps to ~0, the pose
+    must not."""
+    srv = serve_arcos(KinematicActuator(SCALE, start=(32.72, -32.72, 0.0)))
+    try:
+        with base_on(srv, start=Pose2D(1.0, 1.0, 0.0)) as base:
+            assert base.last_sip.x > 32000
+            pose = base.drive(0.1, 0.0, 0.6)
+            assert base.last_sip.x < 1000  # wrapped on the wire
+            moved = srv.emulator.actuator.odometry()[0] - 32.72
+            assert moved > 0.15
+            assert pose.x == pytest.approx(1.0 + moved, abs=0.003)
+            assert pose.y == pytest.approx(1.0, abs=0.003)
+    finally:
+        srv.stop()

@@ -99,11 +99,12 @@ class KinematicActuator:
 
     track = PEOPLEBOT_TRACK
 
-    def __init__(self, time_scale: float = 1.0) -> None:
+    def __init__(self, time_scale: float = 1.0,
+                 start: tuple[float, float, float] = (0.0, 0.0, 0.0)) -> None:
         self.time_scale = time_scale
         self._t0 = time.monotonic()
         self._last = 0.0
-        self._pose = (0.0, 0.0, 0.0)
+        self._pose = start  # m, m, rad: e.g. near the SIP's 32.767 m wrap for tests
         self._vel = (0.0, 0.0)
         self._lock = threading.Lock()
         self.stalled = False
