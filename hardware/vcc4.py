@@ -180,10 +180,11 @@ class VCC4(PanTilt):
         # API pan is positive left, the wire's positive right
         target = (codec.degrees_to_count(-math.degrees(pan)),
                   codec.degrees_to_count(math.degrees(tilt)))
-        self._move_command(target, asked)
+        self._move_command(target, (pan_pps, tilt_pps), asked)
         return self._wait_until_there(target, asked, deadline, timeout)
 
-    def _move_command(self, target: tuple[int, int], asked: str) -> None:
+    def _move_command(self, target: tuple[int, int], speeds: tuple[int, int],
+                      asked: str) -> None:
         try:
             self._exchange(codec.pan_tilt(*target), asked, busy_timeout=0.0)
         except DeviceBusyError:
@@ -193,6 +194,7 @@ class VCC4(PanTilt):
         except ModeError:
             # the camera lost host mode or its calibration (power blip): initialise, retry once
             self.initialize(pedestal=None)
+            self._set_speeds(*speeds)
             self._exchange(codec.pan_tilt(*target), asked)
 
     def _wait_until_there(self, target: tuple[int, int], asked: str, deadline: float,

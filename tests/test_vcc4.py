@@ -392,8 +392,9 @@ def test_driver_reinitialises_after_a_mode_error_and_bounds_busy_retries() -> No
         camera.move_to(math.radians(10))
         assert emulator.host_mode
         emulator.pedestal_ready = False  # a power blip: the camera lost its calibration
-        pan, _ = camera.move_to(math.radians(-10))
+        pan, _ = camera.move_to(math.radians(-10), speed=math.radians(30))
         assert emulator.pedestal_ready and pan == pytest.approx(math.radians(-10), abs=2e-3)
+        assert emulator.pan_speed == 267  # the asked speed survives the re-initialisation
         emulator.timing.init_seconds = 5.0
         emulator.receive(codec.pedestal_init(), time.monotonic())  # someone recalibrates
         time.sleep(0.01)

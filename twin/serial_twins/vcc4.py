@@ -331,7 +331,6 @@ class VCC4Emulator:
         self.pedestal_ready = False
         self._busy_until = now + self.timing.init_seconds
         self._wait_head = True
-        self.pan_speed, self.tilt_speed = codec.PAN_SPEED_MAX, codec.TILT_SPEED_MAX
         self._move(0, 0) if home else self._move(*back)
 
         def done() -> None:
