@@ -271,13 +271,82 @@ def run_trial(config: SweepConfig, pfp: float, pfn: float, trial: int) -> np.nda
     )  # fmt: skip
 
 
+def run_trials(config: SweepConfig, pfp: float, pfn: float, start: int, stop: int) -> np.ndarray:
+    """Summed successes (len(KERNEL_RULES), len(checkpoints)) of trials start..stop-1."""
+    successes = np.zeros((len(KERNEL_RULES), len(config.checkpoints)), dtype=np.int64)
+    for trial in range(start, stop):
+        successes += run_trial(config, pfp, pfn, trial)
+    return successes
+
+
 def run_setting(config: SweepConfig, setting: tuple[float, float]) -> SettingResult:
     """All trials of one (P_fp, P_fn) setting."""
     pfp, pfn = setting
-    successes = np.zeros((len(KERNEL_RULES), len(config.checkpoints)), dtype=np.int64)
-    for trial in range(config.trials):
-        successes += run_trial(config, pfp, pfn, trial)
+    successes = run_trials(config, pfp, pfn, 0, config.trials)
     return SettingResult(pfp, pfn, config.trials, config.checkpoints, successes)
+
+
+@dataclass(frozen=True)
+class Chunk:
+    """A task: trials ``start`` .. ``stop - 1`` of one setting (half-open range)."""
+
+    pfp: float
+    pfn: float
+    start: int
+    stop: int
+
+    @property
+    def setting(self) -> tuple[float, float]:
+        return (self.pfp, self.pfn)
+
+
+@dataclass(frozen=True)
+class ChunkResult:
+    """Summed successes of one chunk's trials; chunks of a setting add up to its result."""
+
+    chunk: Chunk
+    successes: np.ndarray = field(repr=False)  # (len(KERNEL_RULES), len(checkpoints)) ints
+
+
+def run_chunk(config: SweepConfig, chunk: Chunk) -> ChunkResult:
+    """One task of a sweep (a module-level function, so local and Ray workers can import it)."""
+    return ChunkResult(chunk, run_trials(config, chunk.pfp, chunk.pfn, chunk.start, chunk.stop))
+
+
+def missing_ranges(trials: int, done: Iterable[tuple[int, int]]) -> list[tuple[int, int]]:
+    """The half-open trial ranges of 0..trials-1 that no range in ``done`` covers."""
+    covered = np.zeros(trials, dtype=bool)
+    for start, stop in done:
+        covered[start:stop] = True
+    gaps: list[tuple[int, int]] = []
+    trial = 0
+    while trial < trials:
+        if covered[trial]:
+            trial += 1
+            continue
+        end = trial
+        while end < trials and not covered[end]:
+            end += 1
+        gaps.append((trial, end))
+        trial = end
+    return gaps
+
+
+def plan_chunks(
+    config: SweepConfig,
+    chunk_trials: int,
+    done: dict[tuple[float, float], list[tuple[int, int]]] | None = None,
+) -> list[Chunk]:
+    """The tasks still to run: each setting's missing trials cut into chunks of at most
+    ``chunk_trials``, setting by setting (so settings finish, and are journaled whole, early)."""
+    _require(chunk_trials >= 1, f"--chunk must be at least 1 trial, got {chunk_trials}")
+    chunks = []
+    for pfp, pfn in config.settings():
+        ranges = (done or {}).get((pfp, pfn), [])
+        for start, stop in missing_ranges(config.trials, ranges):
+            for first in range(start, stop, chunk_trials):
+                chunks.append(Chunk(pfp, pfn, first, min(first + chunk_trials, stop)))
+    return chunks
 
 
 def result_rows(config: SweepConfig, results: Sequence[SettingResult]) -> list[dict[str, object]]:
@@ -306,18 +375,28 @@ def _identity(config: SweepConfig) -> dict[str, object]:
     }
 
 
-class SweepJournal:
-    """An append-only record of finished settings, so an interrupted sweep resumes.
+DEFAULT_CHUNK_TRIALS = 250  # about 0.6 s of work per task at the default world: overhead < 1 %
 
-    The first line holds the sweep's identity; each further line one finished setting. A line
-    torn by a crash is ignored (that setting simply runs again).
+
+class SweepJournal:
+    """An append-only record of finished chunks of trials, so an interrupted sweep resumes.
+
+    The first line holds the sweep's identity; each further line one finished chunk:
+    ``{"pfp", "pfn", "trials": [start, stop], "successes": [[...], ...]}`` (a line without
+    ``"trials"``, as older sweeps wrote, is the whole setting). A line torn by a crash is
+    ignored (those trials simply run again). A resumed sweep runs exactly the trials no line
+    covers, whatever chunk size either run used; sums of per-trial successes do not depend on
+    how the trials were grouped, so the results equal an uninterrupted run's.
     """
 
-    def __init__(self, path: Path, config: SweepConfig, fresh: bool = False) -> None:
-        self.path = path
+    def __init__(self, path: Path | None, config: SweepConfig, fresh: bool = False) -> None:
+        self.path = path  # None: kept in memory only
         self.config = config
         self.done: dict[tuple[float, float], SettingResult] = {}
+        self.partial: dict[tuple[float, float], list[ChunkResult]] = {}
         identity = _identity(config)
+        if path is None:
+            return
         if path.exists() and not fresh:
             self._read(identity)
         else:
@@ -339,28 +418,62 @@ class SweepJournal:
                 f"{self.path.parent} holds a sweep with other parameters ({', '.join(changed)}); "
                 "choose another --out, or pass --fresh to discard it"
             )
+        shape = (len(KERNEL_RULES), len(self.config.checkpoints))
         for line in lines[1:]:
             try:
                 entry = json.loads(line)
-                result = SettingResult(
-                    float(entry["pfp"]),
-                    float(entry["pfn"]),
-                    self.config.trials,
-                    self.config.checkpoints,
-                    np.asarray(entry["successes"], dtype=np.int64),
-                )
-            except (KeyError, TypeError, ValueError):
-                continue  # a torn last line: that setting runs again
-            if result.successes.shape == (len(KERNEL_RULES), len(self.config.checkpoints)):
-                self.done[(result.pfp, result.pfn)] = result
+                start, stop = entry.get("trials", (0, self.config.trials))
+                chunk = Chunk(float(entry["pfp"]), float(entry["pfn"]), int(start), int(stop))
+                successes = np.asarray(entry["successes"], dtype=np.int64)
+            except (AttributeError, KeyError, TypeError, ValueError):
+                continue  # a torn last line: those trials run again
+            if successes.shape == shape and 0 <= chunk.start < chunk.stop <= self.config.trials:
+                self._add(ChunkResult(chunk, successes))
 
-    def record(self, result: SettingResult) -> None:
-        entry = {"pfp": result.pfp, "pfn": result.pfn, "successes": result.successes.tolist()}
-        with self.path.open("a", encoding="utf-8") as handle:
-            handle.write(json.dumps(entry) + "\n")
-            handle.flush()
-            os.fsync(handle.fileno())
-        self.done[(result.pfp, result.pfn)] = result
+    def _add(self, result: ChunkResult) -> SettingResult | None:
+        """Keep a chunk; return the setting's result if that chunk completed it.
+
+        A chunk overlapping one already kept (two runs writing into one folder) is dropped,
+        so every trial counts once.
+        """
+        setting, chunk = result.chunk.setting, result.chunk
+        if setting in self.done:
+            return None
+        chunks = self.partial.setdefault(setting, [])
+        if any(c.chunk.start < chunk.stop and chunk.start < c.chunk.stop for c in chunks):
+            return None
+        chunks.append(result)
+        if sum(c.chunk.stop - c.chunk.start for c in chunks) < self.config.trials:
+            return None
+        total = np.sum([c.successes for c in chunks], axis=0, dtype=np.int64)
+        del self.partial[setting]
+        done = SettingResult(setting[0], setting[1], self.config.trials,
+                             self.config.checkpoints, total)  # fmt: skip
+        self.done[setting] = done
+        return done
+
+    def ranges(self) -> dict[tuple[float, float], list[tuple[int, int]]]:
+        """Trial ranges already run, per setting (whole settings as one range)."""
+        out = {s: [(0, self.config.trials)] for s in self.done}
+        for setting, chunks in self.partial.items():
+            out[setting] = [(c.chunk.start, c.chunk.stop) for c in chunks]
+        return out
+
+    def record(self, result: ChunkResult) -> SettingResult | None:
+        """Append one finished chunk (flushed to disk); return its setting's result if complete."""
+        chunk = result.chunk
+        entry = {
+            "pfp": chunk.pfp,
+            "pfn": chunk.pfn,
+            "trials": [chunk.start, chunk.stop],
+            "successes": result.successes.tolist(),
+        }
+        if self.path is not None:
+            with self.path.open("a", encoding="utf-8") as handle:
+                handle.write(json.dumps(entry) + "\n")
+                handle.flush()
+                os.fsync(handle.fileno())
+        return self._add(result)
 
 
 def run_sweep(
@@ -368,17 +481,24 @@ def run_sweep(
     executor: Executor,
     journal: SweepJournal | None = None,
     on_result: Callable[[SettingResult], None] | None = None,
+    chunk_trials: int = DEFAULT_CHUNK_TRIALS,
+    on_chunk: Callable[[ChunkResult], None] | None = None,
 ) -> list[SettingResult]:
-    """Run every setting not already in ``journal``; return all results in setting order."""
-    done = dict(journal.done) if journal else {}
-    todo = [s for s in config.settings() if s not in done]
-    for _, result in executor.map_unordered(partial(run_setting, config), todo):
-        if journal:
-            journal.record(result)
-        done[(result.pfp, result.pfn)] = result
-        if on_result:
-            on_result(result)
-    return [done[s] for s in config.settings()]
+    """Run every trial not already in ``journal``; return all results in setting order.
+
+    Tasks are chunks of up to ``chunk_trials`` trials of one setting; each is journaled as it
+    arrives (then ``on_chunk``), and ``on_result`` is called when a setting's last chunk arrives.
+    The results do not depend on ``chunk_trials``, the executor or its number of workers.
+    """
+    journal = journal or SweepJournal(None, config)
+    todo = plan_chunks(config, chunk_trials, journal.ranges())
+    for _, result in executor.map_unordered(partial(run_chunk, config), todo):
+        complete = journal.record(result)
+        if on_chunk:
+            on_chunk(result)
+        if complete is not None and on_result:
+            on_result(complete)
+    return [journal.done[s] for s in config.settings()]
 
 
 def write_results_csv(path: Path, rows: Sequence[dict[str, object]]) -> Path:
