@@ -9,6 +9,7 @@ port turns the usual failures into one-line ``DeviceError``s that name the devic
 from __future__ import annotations
 
 import errno
+import termios
 from typing import Protocol
 
 import serial
@@ -95,7 +96,8 @@ class SerialTransport:
     def reset_input(self) -> None:
         try:
             self._serial.reset_input_buffer()
-        except (OSError, serial.SerialException) as exc:
+        except (OSError, serial.SerialException, termios.error) as exc:
+            # A hung-up pty makes tcflush raise termios.error, which pyserial lets through.
             raise ConnectionLostError(
                 self.name, f"flush {self.port}", str(exc), "check that the device is plugged in"
             ) from None
