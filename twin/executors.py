@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import multiprocessing
 import os
+import socket
 from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
 from typing import Any, Protocol, TypeVar
@@ -140,6 +141,7 @@ class RayExecutor:
                     configure_logging=False,
                 )
             else:
+                _reachable(address)
                 try:
                     ray.init(address=address, log_to_driver=False, configure_logging=False)
                 except (ConnectionError, RuntimeError, ValueError) as exc:
@@ -179,6 +181,20 @@ class RayExecutor:
         if self._owns_session and self._ray.is_initialized():
             self._ray.shutdown()
         self._owns_session = False
+
+
+def _reachable(address: str, timeout: float = 5.0) -> None:
+    """Fail fast on a HOST:PORT nobody listens on (Ray itself would retry for minutes)."""
+    host, _, port = address.rpartition(":")
+    if "://" in address or not host or not port.isdigit():
+        return  # "auto", "ray://...": Ray resolves these itself
+    try:
+        socket.create_connection((host, int(port)), timeout=timeout).close()
+    except OSError as exc:
+        raise TwinError(
+            f"no Ray cluster answers at {address} ({exc.strerror or exc}); start one with "
+            "'ray start --head' there, or drop --address for a local one"
+        ) from None
 
 
 def _unwrap(ray, ref):

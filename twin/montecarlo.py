@@ -405,7 +405,11 @@ class SweepJournal:
                 handle.write(json.dumps({"sweep": identity}) + "\n")
 
     def _read(self, identity: dict[str, object]) -> None:
-        lines = self.path.read_text(encoding="utf-8").splitlines()
+        text = self.path.read_text(encoding="utf-8")
+        if text and not text.endswith("\n"):  # end a line torn by a crash: appends start anew
+            with self.path.open("a", encoding="utf-8") as handle:
+                handle.write("\n")
+        lines = text.splitlines()
         try:
             recorded = json.loads(lines[0])["sweep"]
         except (IndexError, KeyError, TypeError, json.JSONDecodeError):

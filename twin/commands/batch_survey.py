@@ -1,0 +1,100 @@
+"""``twin batch-survey``: many randomized survey missions in the twin, one summary.
+
+Runs are appended to ``DIR/runs.jsonl`` as they finish; running the same batch into the same
+folder again runs only the missing runs (a larger ``--runs`` adds runs).
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+from twin.commands._args import comma_list, numbers
+from twin.commands.montecarlo import add_executor_arguments
+
+DEFAULT_OUT = Path("runs/batch")
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    parser = subparsers.add_parser(
+        "batch-survey",
+        help="run many randomized survey missions (target, lighting, threshold) into a summary",
+        description="Fly the survey mission --runs times in the twin, each run seeded from "
+        "(--seed, run index), varying the target's place on the furniture tops, the scene's "
+        "light intensities and the detector's threshold; write DIR/runs.jsonl as runs finish, "
+        "then DIR/summary.csv, DIR/summary.json, DIR/errors.png and DIR/success_vs_*.png. "
+        "No Rerun recording is made.",
+    )
+    parser.add_argument("--runs", type=int, default=20, help="missions (20)")
+    parser.add_argument("--seed", type=int, default=0, help="batch seed (0)")
+    parser.add_argument(
+        "--vary", type=comma_list(str, "factors"), default=("target", "lighting", "threshold"),
+        help="factors to randomize: target,lighting,threshold (default: all three)",
+    )  # fmt: skip
+    parser.add_argument(
+        "--lighting", type=numbers(2, "LOW,HIGH light scales"), default=(0.5, 1.5),
+        help="range of the light-intensity scale (default 0.5,1.5; 1 is the scene's)",
+    )  # fmt: skip
+    parser.add_argument(
+        "--threshold", type=numbers(2, "LOW,HIGH thresholds"), default=(0.0, 0.5),
+        help="range of the detector threshold: patch scores below it read 0 (default 0,0.5)",
+    )  # fmt: skip
+    parser.add_argument(
+        "--tolerance", type=float, default=0.3, help="success radius in metres (0.3)"
+    )
+    parser.add_argument("--config", type=Path, help="survey config (TOML); default: shipped")
+    parser.add_argument("--out", type=Path, default=DEFAULT_OUT, help=f"folder ({DEFAULT_OUT})")
+    add_executor_arguments(parser)
+    parser.add_argument("--fresh", action="store_true", help="discard a previous batch in --out")
+    parser.add_argument("--quiet", action="store_true", help="no progress and no summary")
+    parser.set_defaults(handler=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from tqdm import tqdm
+
+    from twin.batch import JOURNAL_NAME, BatchJournal, BatchSpec, prepare, run_batch, write_summary
+    from twin.config import ConfigError, default_config_path
+    from twin.errors import InputError
+    from twin.executors import make_executor
+
+    started = time.perf_counter()
+    if args.runs < 1:
+        raise InputError(f"--runs must be at least 1, got {args.runs}")
+    source = (args.config or default_config_path()).resolve()
+    try:
+        text = source.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise ConfigError(f"{source}: no such config file; check the path") from None
+    spec = BatchSpec(
+        text, source.name, str(source.parent), str(Path.cwd()), args.seed,
+        tuple(dict.fromkeys(args.vary)), args.lighting, args.threshold, args.tolerance,
+    )  # fmt: skip
+    say = (lambda _: None) if args.quiet else print
+    prepare(spec, say)
+    journal = BatchJournal(args.out / JOURNAL_NAME, spec, fresh=args.fresh)
+    done = sum(1 for i in journal.done if i < args.runs)
+    if done:
+        say(f"resuming the batch in {args.out}: {done} of {args.runs} runs done")
+    executor = make_executor(args.workers, args.executor, args.address)
+    bar = tqdm(
+        total=args.runs, initial=done, unit="run", desc="batch-survey",
+        disable=args.quiet or not sys.stderr.isatty(),
+    )  # fmt: skip
+    try:
+        with bar:
+            results = run_batch(spec, args.runs, executor, journal, lambda _: bar.update())
+    finally:
+        executor.close()
+    summary, paths = write_summary(args.out, spec, results, time.perf_counter() - started)
+    error = summary["error_m"]
+    say(
+        f"{summary['target']}: {summary['successes']}/{summary['runs']} runs within "
+        f"{spec.tolerance} m ({100 * summary['success_rate']:.0f} %); error median "
+        f"{error['median']:.2f} m, p90 {error['p90']:.2f} m, max {error['max']:.2f} m; "
+        f"{summary['timings_s']['mission']['mean']:.1f} s per mission"
+    )
+    say("wrote " + ", ".join(str(p) for p in paths))
+    return 0
