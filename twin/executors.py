@@ -117,9 +117,12 @@ class RayExecutor:
 
     With ``address`` it joins a running cluster (``ray start --head`` printed the address; "auto"
     finds one started on this machine) and ``workers`` defaults to the cluster's CPUs; without it
-    it starts a private local cluster of ``workers`` CPUs (default: this machine's cores) bound
-    to the loopback interface, with no dashboard, and shuts it down on ``close``. A Ray session
-    that is already initialised in this process (tests, notebooks) is used as it is.
+    it starts a private local cluster of ``workers`` CPUs (default: this machine's cores) with
+    no dashboard and a small object store, and shuts it down on ``close``. A Ray session that is
+    already initialised in this process (tests, notebooks) is used as it is.
+
+    Ray's servers listen on all interfaces even for a local cluster (it maps 127.0.0.1 to the
+    node's address on purpose), so run it on a trusted network only (docs/cluster.md).
     """
 
     def __init__(self, workers: int | None = None, address: str | None = None) -> None:
@@ -136,7 +139,6 @@ class RayExecutor:
                     num_cpus=cpus,
                     include_dashboard=False,
                     object_store_memory=LOCAL_OBJECT_STORE_BYTES,
-                    _node_ip_address="127.0.0.1",
                     log_to_driver=False,
                     configure_logging=False,
                 )

@@ -1,0 +1,189 @@
+"""twin batch-survey: randomized missions end to end, resume, reused worlds, the factors."""
+
+import csv
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from twin.batch import (
+    _WORLDS,
+    BatchSpec,
+    MissionWorld,
+    ThresholdedDetector,
+    draw_mission,
+    run_mission,
+)
+from twin.cli import main
+from twin.errors import InputError
+
+SHIPPED = Path(__file__).resolve().parents[1] / "scenes" / "living_room_survey.toml"
+DETERMINISTIC = ("run", "lighting", "threshold", "objects", "views")
+
+
+def tiny_config(folder: Path, cache: Path) -> Path:
+    """The shipped mission cut to 1 stop x 2 views, no recording, a shared model cache."""
+    replace = {
+        "stops": "[[2.5, 3.3]]",
+        "views_per_stop": "2",
+        "rerun": '"off"',
+        "cache": f'"{cache}"',
+        "file": f'"{SHIPPED.parent / "living_room.xml"}"',
+    }
+    lines = []
+    for line in SHIPPED.read_text().splitlines():
+        key = line.split("=")[0].strip()
+        lines.append(f"{key} = {replace[key]}" if key in replace and "=" in line else line)
+    path = folder / "tiny.toml"
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+@pytest.fixture(scope="module")
+def tiny(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("batch")
+    return tiny_config(folder, folder / "cache")
+
+
+def spec_for(config: Path, seed: int, **kwargs) -> BatchSpec:
+    return BatchSpec(config.read_text(), config.name, str(config.parent), str(Path.cwd()),
+                     seed, **kwargs)  # fmt: skip
+
+
+def runs(out: Path) -> dict[int, dict]:
+    done = {}
+    for line in (out / "runs.jsonl").read_text().splitlines()[1:]:
+        try:
+            entry = json.loads(line)
+        except json.JSONDecodeError:
+            continue  # the torn line a test wrote
+        done[entry["run"]] = entry
+    return done
+
+
+def deterministic(result: dict) -> dict:
+    return {k: result[k] for k in DETERMINISTIC}
+
+
+@pytest.fixture(scope="module")
+def batch_run(tiny, tmp_path_factory):
+    out = tmp_path_factory.mktemp("batch-out") / "b"
+    argv = ["batch-survey", "--runs", "2", "--seed", "4", "--config", str(tiny), "--out",
+            str(out), "--workers", "1", "--quiet"]  # fmt: skip
+    assert main(argv) == 0
+    return out, argv
+
+
+def test_a_batch_writes_runs_summary_and_plots(batch_run):
+    out, _ = batch_run
+    done = runs(out)
+    assert sorted(done) == [0, 1]
+    for r in done.values():
+        assert 0.5 <= r["lighting"] <= 1.5 and 0.0 <= r["threshold"] <= 0.5
+        assert r["views"] == 2 and "error_m" in r["objects"]["rice_box"]
+    assert done[0]["lighting"] != done[1]["lighting"]
+    assert done[0]["objects"]["rice_box"]["truth_m"] != done[1]["objects"]["rice_box"]["truth_m"]
+    with (out / "summary.csv").open() as handle:
+        rows = list(csv.DictReader(handle))
+    assert [int(r["run"]) for r in rows] == [0, 1]
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["runs"] == 2 and summary["tolerance_m"] == 0.3
+    hits = sum(float(r["error_m"]) <= 0.3 for r in rows)
+    assert summary["success_rate"] == hits / 2
+    assert summary["error_m"]["max"] == max(float(r["error_m"]) for r in rows)
+    for name in ("errors", "success_vs_target", "success_vs_lighting", "success_vs_threshold"):
+        assert (out / f"{name}.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_a_batch_resumes_running_only_missing_runs(batch_run, capsys):
+    out, argv = batch_run
+    before = (out / "runs.jsonl").read_text()
+    with (out / "runs.jsonl").open("a") as handle:
+        handle.write('{"run": 2, "lighting": 0.')  # torn by a crash
+    capsys.readouterr()
+    more = [a if a != "2" else "3" for a in argv]
+    more.remove("--quiet")
+    assert main(more) == 0
+    assert "2 of 3 runs done" in capsys.readouterr().out
+    text = (out / "runs.jsonl").read_text()
+    assert text.startswith(before)  # the finished runs were neither rerun nor rewritten
+    assert sorted(runs(out)) == [0, 1, 2]
+    assert len(text.splitlines()) == 1 + 2 + 1 + 1  # header, 2 runs, the torn line, run 2
+
+
+def test_a_reused_world_gives_the_same_mission_as_a_fresh_one(batch_run, tiny):
+    out, _ = batch_run
+    spec = spec_for(tiny, 4)
+    reused = runs(out)[1]
+    assert reused["reused_world"]  # run 1 ran in the world run 0 left behind
+    _WORLDS.clear()
+    fresh = run_mission(spec, 1)
+    assert not fresh["reused_world"]
+    assert deterministic(fresh) == deterministic(reused)
+
+
+def test_a_batch_with_other_parameters_is_refused(batch_run, capsys):
+    _, argv = batch_run
+    other = [a if a != "4" else "5" for a in argv]
+    assert main(other) == 2
+    err = capsys.readouterr().err.strip()
+    assert "other parameters (seed)" in err and len(err.splitlines()) == 1
+
+
+def test_draws_depend_on_seed_run_and_factor_only(tiny):
+    spec = spec_for(tiny, 9)
+    assert draw_mission(spec, 3) == draw_mission(spec, 3)
+    assert draw_mission(spec, 3) != draw_mission(spec, 4)
+    lighting_only = spec_for(tiny, 9, vary=("lighting",))
+    assert draw_mission(lighting_only, 3).lighting == draw_mission(spec, 3).lighting
+    assert draw_mission(lighting_only, 3).threshold == 0.0
+    assert not draw_mission(lighting_only, 3).place_target
+
+
+def test_lighting_scales_the_rendered_image(tiny):
+    spec = spec_for(tiny, 0, vary=("lighting",))
+    world = MissionWorld(spec)
+    try:
+        means = []
+        for scale in (0.5, 1.5):
+            world.reset(spec, draw_mission(spec, 0).__class__(0, scale, 0.0, False))
+            means.append(float(world.robot.capture().image.mean()))
+        assert means[1] > means[0] + 20  # out of 255
+    finally:
+        world.close()
+
+
+def test_the_threshold_zeroes_patch_scores_below_it():
+    class Fixed:
+        names = ("a",)
+
+        def scores(self, image):
+            return np.array([[[0.1, 0.6], [0.3, 0.2]]])
+
+    out = ThresholdedDetector(Fixed(), 0.25).scores(None)
+    np.testing.assert_array_equal(out, [[[0.0, 0.6], [0.3, 0.0]]])
+    np.testing.assert_array_equal(ThresholdedDetector(Fixed(), 0.0).scores(None), Fixed().scores(0))
+
+
+@pytest.mark.parametrize(
+    ("argv", "match"),
+    [(["--vary", "target,weather"], "--vary: unknown factor 'weather'"),
+     (["--lighting", "0,1"], "--lighting must be LOW,HIGH with 0 < LOW"),
+     (["--threshold", "0.5,0.2"], "--threshold must be LOW,HIGH within [0, 1]"),
+     (["--runs", "0"], "--runs must be at least 1")],
+)  # fmt: skip
+def test_bad_batch_input_is_one_line(tmp_path, capsys, tiny, argv, match):
+    code = main(["batch-survey", "--config", str(tiny), "--out", str(tmp_path / "x"), *argv])
+    err = capsys.readouterr().err.strip()
+    assert code == 2
+    assert match in err and len(err.splitlines()) == 1
+
+
+def test_a_spec_rejects_a_hardware_config(tmp_path):
+    sim_camera = 'type = "sim"\n\n[robot.pantilt]'
+    text = SHIPPED.read_text().replace(sim_camera, sim_camera.replace("sim", "vcc4", 1))
+    config = tmp_path / "hw.toml"
+    config.write_text(text)
+    with pytest.raises(InputError, match="simulation only"):
+        spec_for(config, 0).load()
