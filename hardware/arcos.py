@@ -166,6 +166,21 @@ class ArcosBase(Base):
         self._start_link()
         self._connected = True
 
+    def identify(self) -> tuple[str, str, str]:
+        """(name, class, subclass) from the SYNC handshake alone: the robot is not opened, so
+        nothing moves and its firmware returns to waiting for a client (``twin hw probe``)."""
+        if self._connected:
+            assert self.identity is not None
+            return self.identity
+        transport = self._transport = self._open_transport()
+        try:
+            self._handshake(transport)
+        finally:
+            self._transport = None
+            transport.close()
+        assert self.identity is not None
+        return self.identity
+
     def _start_link(self) -> None:
         transport = self._open_transport()
         self._transport, self._lost = transport, None

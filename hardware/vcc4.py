@@ -134,6 +134,23 @@ class VCC4(PanTilt):
             self._transport.close()
             self._transport = None
 
+    def identify(self) -> str:
+        """Ask for the camera's operation status without changing anything (``twin hw probe``).
+
+        Any well-formed answer, even a mode error from a camera in local mode, proves a VC-C4
+        (or a compatible head) is on the line; returns a one-line description of it."""
+        if self._transport is None:
+            assert self._opener is not None
+            self._transport = self._opener()
+        try:
+            with self._lock:
+                answer = self._round_trip(codec.operation_status(), "identify", 0)
+        finally:
+            if not self._connected:
+                self._release()
+        mode = "error flags " + f"{answer.flags:02X}" if answer.flags else "ready"
+        return f"VC-C4 answers ({mode}, status {codec.describe(answer.status) or 'none'})"
+
     # -- initialisation -------------------------------------------------------------------------
     def initialize(self, pedestal: bool | None = True) -> None:
         """Host control, camera on, pedestal initialisation, top speeds, full tilt range.

@@ -22,6 +22,7 @@ COMMAND_MODULES: tuple[str, ...] = (
     "twin.commands.sim",
     "twin.commands.survey",
     "twin.commands.hw",
+    "twin.commands.serve_hardware",
     "twin.commands.batch_survey",
 )
 

@@ -86,6 +86,7 @@ class SurveyConfig:
     out: Path
     rerun: str
     cache: Path
+    twin_time_scale: float = 1.0  # serial twins: simulated seconds per wall-clock second
 
 
 def default_config_path() -> Path:
@@ -229,11 +230,16 @@ def parse_config(data: dict[str, Any], source: str, folder: Path, base_dir: Path
 
     mission = _mission(root.table("mission"))
     grid = _grid(root.table("grid"))
+    twins = root.table("serial_twins", required=False)
+    time_scale = twins.number("time_scale", 1.0, lambda v: 0.0 < v <= 20.0, "a factor in (0, 20]")
+    twins.finish()
     detector_table = root.table("detector", required=False)
     detector = dict(detector_table.data)
     objects = _objects(root.table("objects"), folder)
     root.finish()
-    return SurveyConfig(source, scene, devices, mission, grid, objects, detector, out, rerun, cache)
+    return SurveyConfig(
+        source, scene, devices, mission, grid, objects, detector, out, rerun, cache, time_scale
+    )
 
 
 def _resolve(text: str, folder: Path, fallback: Path) -> Path:

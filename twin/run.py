@@ -31,18 +31,31 @@ def run_mission(
     out: Path, options: dict[str, Any], resume: bool, started: float, quiet: bool = False
 ) -> dict[str, Any]:
     """Run or resume the survey in ``out``; returns (and writes) ``result.json``'s content."""
-    from twin.detection import prepare_detector
-    from twin.factory import build_robot
+    from twin.factory import BuildContext, build_robot, uses_sim_world
 
-    setup_started = time.perf_counter()
     config = load_config(
         out / "config.toml",
         base_dir=Path(options["working_dir"]),
         folder=Path(options["config_source"]).parent,
     )
-    robot, context = build_robot(config)
+    context = BuildContext(config)
     if options.get("place_target") == "random":
+        if not uses_sim_world(config):
+            raise InputError("--place-target random works in the simulation only")
+        # Before any serial twin starts stepping the world: placing edits the model.
         _place_target_randomly(config, context, int(options.get("seed", 0)))
+    robot, context = build_robot(config, context)
+    try:
+        return _fly(config, robot, context, out, options, resume, started, quiet)
+    finally:
+        context.close()
+
+
+def _fly(config, robot, context, out, options, resume, started, quiet) -> dict[str, Any]:
+    """The run proper, once the devices (and any serial twins) exist."""
+    from twin.detection import prepare_detector
+
+    setup_started = time.perf_counter()
     truth = _truth(config, context)
     scene = _scene_info(config, context, truth)
     say = (lambda _: None) if quiet else print
@@ -124,8 +137,6 @@ def _finite(value: Any) -> Any:
 
 
 def _place_target_randomly(config: SurveyConfig, context, seed: int) -> None:
-    if context.config.devices["base"].type != "sim":
-        raise InputError("--place-target random works in the simulation only")
     from twin.sim.placement import random_surface_pose
 
     rng = np.random.default_rng(seed)

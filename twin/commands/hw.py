@@ -9,6 +9,7 @@ import argparse
 import importlib
 
 HW_MODULES: tuple[str, ...] = (
+    "twin.commands.hw_probe",
     "twin.commands.hw_vcc4",
     "twin.commands.hw_arcos",
 )

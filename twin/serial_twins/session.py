@@ -1,0 +1,66 @@
+"""The serial twins of one robot: the sim world stepped in wall-clock time, the emulated ARCOS
+base and VC-C4 head on pseudo-terminals, started and stopped together.
+
+``twin serve-hardware`` runs one for users' own tools; the device factory starts one when a
+config gives a hardware device ``port = "twin"``, so the real drivers fly the mission against it.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from twin.serial_twins.arcos import serve_arcos
+from twin.serial_twins.pty import PtyLink
+from twin.serial_twins.runner import WorldRunner
+from twin.serial_twins.vcc4 import SimHeadActuator, VCC4Emulator, serve_vcc4
+from twin.sim.robot import SimRobot
+
+VCC4_WIRINGS = ("direct", "aux")
+
+
+class SerialTwins:
+    """An ARCOS emulator, and a VC-C4 emulator on its own line (``direct``) or behind the base's
+    AUX1 port (``aux``), both driving ``sim``, whose world a ``WorldRunner`` steps."""
+
+    def __init__(self, sim: SimRobot, time_scale: float = 1.0, vcc4_wiring: str = "direct",
+                 link_dir: Path | None = None) -> None:  # fmt: skip
+        if vcc4_wiring not in VCC4_WIRINGS:
+            raise ValueError(f"vcc4_wiring must be one of {VCC4_WIRINGS}, got {vcc4_wiring!r}")
+        self.sim, self.vcc4_wiring = sim, vcc4_wiring
+        self._runner = WorldRunner(sim, time_scale)
+
+        def link(name: str) -> PtyLink:
+            if link_dir is None:
+                return PtyLink()
+            link_dir.mkdir(parents=True, exist_ok=True)
+            return PtyLink(link_dir / name)
+
+        self._vcc4 = None
+        aux1 = None
+        if vcc4_wiring == "aux":
+            aux1 = VCC4Emulator(SimHeadActuator(sim))
+        else:
+            self._vcc4 = serve_vcc4(sim, link("vcc4"))
+        self._arcos = serve_arcos(sim, link("arcos"), aux1=aux1)
+        self._runner.start()
+
+    @property
+    def arcos_path(self) -> str:
+        return self._arcos.path
+
+    @property
+    def vcc4_path(self) -> str | None:
+        """The VC-C4's own line, or None when it hangs off the base's AUX1 port."""
+        return self._vcc4.path if self._vcc4 is not None else None
+
+    def stop(self) -> None:
+        for server in (self._vcc4, self._arcos):
+            if server is not None:
+                server.stop()
+        self._runner.stop()
+
+    def __enter__(self) -> SerialTwins:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.stop()
