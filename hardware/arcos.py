@@ -28,6 +28,7 @@ import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import TypeVar
 
 from hardware.arcos_codec import (
     MAX_STRING,
@@ -57,6 +58,8 @@ XY_TOLERANCE = 0.03  # m: closer than this, go_to only turns (as the sim's contr
 YAW_TOLERANCE = math.radians(1.0)
 ORIGIN = Pose2D(0.0, 0.0, 0.0)
 AUX_PORTS = {1: (Command.TTY2, Command.GETAUX, 0xB0), 2: (66, 67, 0xB8), 3: (60, 61, 0xC8)}
+
+T = TypeVar("T")
 
 
 @dataclass(frozen=True)
@@ -590,10 +593,28 @@ class ArcosAuxTransport:
                                       "take a new one from ArcosBase.aux_transport()")
         self.base._require_link(asked)
 
+    def _recovering(self, operation: Callable[[], T]) -> T:
+        """Run ``operation``; if the base's line was lost meanwhile, reconnect it (when the base
+        does so for its own calls) and run it once more, so a device on the AUX port rides
+        through a replugged cable exactly as the base does."""
+        try:
+            return operation()
+        except ConnectionLostError:
+            if self._closed or not self.base.auto_reconnect:
+                raise
+            self.base._lost = self.base._lost or ConnectionLostError(
+                self.name, "use the AUX port", "the line went away", "reconnecting")
+            self.base._require_link("reconnect for the AUX port")
+            return operation()
+
     def write(self, data: bytes) -> None:
         self._check(f"write {len(data)} bytes")
-        for i in range(0, len(data), MAX_STRING):
-            self.base._write(command(self._tty, bytes(data[i:i + MAX_STRING])))
+
+        def send() -> None:
+            for i in range(0, len(data), MAX_STRING):
+                self.base._write(command(self._tty, bytes(data[i:i + MAX_STRING])))
+
+        self._recovering(send)
 
     def _take(self, size: int) -> bytes:
         buf = self.base._aux[self.port]
@@ -603,6 +624,9 @@ class ArcosAuxTransport:
 
     def read(self, size: int, timeout: float) -> bytes:
         self._check(f"read {size} bytes")
+        return self._recovering(lambda: self._read(size, timeout))
+
+    def _read(self, size: int, timeout: float) -> bytes:
         base = self.base
         end = time.monotonic() + timeout
         with base._cond:
@@ -632,9 +656,13 @@ class ArcosAuxTransport:
 
     def reset_input(self) -> None:
         self._check("flush")
-        self.base._write(command(self._getaux, 0))
-        with self.base._cond:
-            self.base._aux[self.port].clear()
+
+        def flush() -> None:
+            self.base._write(command(self._getaux, 0))
+            with self.base._cond:
+                self.base._aux[self.port].clear()
+
+        self._recovering(flush)
 
     def close(self) -> None:
         self._closed = True

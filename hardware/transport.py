@@ -75,7 +75,7 @@ class SerialTransport:
         try:
             self._serial.write(data)
             self._serial.flush()
-        except (OSError, serial.SerialException) as exc:
+        except (OSError, serial.SerialException, termios.error) as exc:
             raise ConnectionLostError(
                 self.name,
                 f"write {len(data)} bytes to {self.port}",
@@ -87,7 +87,7 @@ class SerialTransport:
         try:
             self._serial.timeout = max(timeout, 0.0)
             return self._serial.read(size)
-        except (OSError, serial.SerialException, TypeError) as exc:
+        except (OSError, serial.SerialException, termios.error, TypeError) as exc:
             # pyserial raises TypeError from a closed port's internal state on some versions.
             raise ConnectionLostError(
                 self.name, f"read from {self.port}", str(exc), "check that the device is plugged in"

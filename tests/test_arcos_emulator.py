@@ -84,8 +84,8 @@ def test_open_in_both_forms_starts_sips_every_100_ms(open_arg: int | None) -> No
     assert exchange(emu, command(Command.OPEN, open_arg), now) == []
     assert emu.state == "open"
     sips = []
-    for i in range(1, 11):  # one second of 50 ms ticks
-        sips += exchange(emu, b"", now + 0.05 * i)
+    for i in range(1, 11):  # half a second of 50 ms ticks, each just past a SIP's due time
+        sips += exchange(emu, b"", now + 0.05 * i + 1e-6)
     assert len(sips) == 5 and all(is_sip(p) for p in sips)
 
 

@@ -62,9 +62,45 @@ def opencv_camera(tmp_path) -> Iterator[Camera]:
     yield OpenCVCamera(str(video), reconnect_delay=0.01)
 
 
+@contextlib.contextmanager
+def serial_twins(wiring: str = "direct", time_scale: float = 4.0) -> Iterator:
+    from twin.serial_twins.session import SerialTwins
+    from twin.sim import make_sim_robot
+
+    sim, _ = make_sim_robot("living_room", start=Pose2D(2.5, 3.3, 0.0))
+    with SerialTwins(sim, time_scale=time_scale, vcc4_wiring=wiring) as twins:
+        yield sim, twins
+
+
+@contextlib.contextmanager
+def vcc4_on_its_line(tmp_path) -> Iterator[PanTilt]:
+    from hardware.vcc4 import VCC4
+
+    with serial_twins() as (_, twins):
+        yield VCC4.open(twins.vcc4_path)
+
+
+@contextlib.contextmanager
+def vcc4_on_the_aux_port(tmp_path) -> Iterator[PanTilt]:
+    from hardware.arcos import ArcosBase
+    from hardware.vcc4 import VCC4
+
+    with serial_twins("aux") as (_, twins), ArcosBase.open(twins.arcos_path) as base:
+        yield VCC4(base.aux_transport(1), answer_timeout=1.0)
+
+
+@contextlib.contextmanager
+def arcos_base(tmp_path) -> Iterator[Base]:
+    from hardware.arcos import ArcosBase
+
+    # Real time: a drive's duration is wall-clock time on the driver's side.
+    with serial_twins(time_scale=1.0) as (sim, twins):
+        yield ArcosBase.open(twins.arcos_path, start=sim.truth_pose())
+
+
 CAMERAS = {"sim": sim_camera, "opencv": opencv_camera}
-PANTILTS = {"sim": sim_pantilt}
-BASES = {"sim": sim_base}
+PANTILTS = {"sim": sim_pantilt, "vcc4": vcc4_on_its_line, "vcc4-aux": vcc4_on_the_aux_port}
+BASES = {"sim": sim_base, "arcos": arcos_base}
 
 
 @pytest.fixture(params=sorted(CAMERAS))

@@ -11,8 +11,10 @@ from __future__ import annotations
 
 import importlib
 import math
+import tempfile
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 from twin.config import DeviceConfig, SurveyConfig
@@ -43,6 +45,7 @@ class BuildContext:
     devices: dict[str, Device] = field(default_factory=dict)
     _sim: Any = None
     _twins: Any = None
+    _links: Any = None  # a temporary folder of stable links to the twins' pseudo-terminals
 
     @property
     def start(self) -> Pose2D:
@@ -64,7 +67,11 @@ class BuildContext:
 
             head = self.config.devices["pantilt"]
             wiring = head.options.get("wiring", "direct") if head.type == "vcc4" else "direct"
-            self._twins = SerialTwins(self.sim, self.config.twin_time_scale, wiring)
+            # Stable paths, so a driver can reopen its port after the twin's line is replaced.
+            self._links = tempfile.TemporaryDirectory(prefix="twin-ports-")
+            self._twins = SerialTwins(
+                self.sim, self.config.twin_time_scale, wiring, Path(self._links.name)
+            )
         return self._twins
 
     def close(self) -> None:
@@ -72,6 +79,7 @@ class BuildContext:
         if self._twins is not None:
             self._twins.stop()
             self._twins = None
+            self._links.cleanup()
 
 
 def _take(device: DeviceConfig, allowed: dict[str, Any]) -> dict[str, Any]:
@@ -176,8 +184,9 @@ def _factory(device: DeviceConfig) -> Callable[[DeviceConfig, BuildContext], Dev
 
 def uses_sim_world(config: SurveyConfig) -> bool:
     """Whether the config's robot lives in the MuJoCo world (sim devices or serial twins)."""
-    return any(d.type == "sim" or d.options.get("port") == TWIN_PORT
-               for d in config.devices.values())  # fmt: skip
+    return any(
+        d.type == "sim" or d.options.get("port") == TWIN_PORT for d in config.devices.values()
+    )
 
 
 def build_robot(

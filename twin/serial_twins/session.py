@@ -53,6 +53,14 @@ class SerialTwins:
         """The VC-C4's own line, or None when it hangs off the base's AUX1 port."""
         return self._vcc4.path if self._vcc4 is not None else None
 
+    def hangup(self, device: str) -> None:
+        """Unplug and replug ``device`` ("arcos" or "vcc4"): its pseudo-terminal is replaced
+        (a stable link follows it), as a cable pulled mid-mission would (fault injection)."""
+        server = {"arcos": self._arcos, "vcc4": self._vcc4}.get(device)
+        if server is None:
+            raise ValueError(f"no serial twin {device!r} on its own line here")
+        server.hangup()
+
     def stop(self) -> None:
         for server in (self._vcc4, self._arcos):
             if server is not None:

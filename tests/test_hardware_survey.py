@@ -1,0 +1,150 @@
+"""The survey flown by the real drivers against the serial twins, and the hardware commands."""
+
+import json
+import math
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from twin.cli import main
+
+TWINS = Path(__file__).resolve().parents[1] / "scenes" / "living_room_serial_twins.toml"
+REDUCED_STOPS = "[[1.1, 1.2], [2.5, 3.3], [2.7, 4.4]]"
+
+
+def reduced(config: Path, folder: Path, cache: Path, time_scale: float | None) -> Path:
+    """``config`` with the reduced mission, no recording, a shared cache and a given pace."""
+    text = config.read_text()
+    text = text.replace('rerun = "save"', 'rerun = "off"')
+    text = text.replace('cache = "runs/cache"', f'cache = "{cache}"')
+    text = text.replace('file = "living_room.xml"', f'file = "{config.parent / "living_room.xml"}"')
+    lines = [
+        f"stops = {REDUCED_STOPS}" if line.startswith("stops =") else line
+        for line in text.splitlines()
+    ]
+    if time_scale is not None:
+        lines = [
+            f"time_scale = {time_scale}" if line.startswith("time_scale =") else line
+            for line in lines
+        ]
+    path = folder / config.name
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+@pytest.fixture(scope="module")
+def cache(tmp_path_factory):
+    return tmp_path_factory.mktemp("cache")
+
+
+def survey(config: Path, out: Path) -> dict:
+    assert main(["survey", "--config", str(config), "--out", str(out), "--quiet"]) == 0
+    return json.loads((out / "result.json").read_text())["objects"]["rice_box"]
+
+
+def test_the_real_drivers_fly_the_mission_on_the_twins_to_the_same_cell(tmp_path, cache):
+    """ARCOS driver + VC-C4 driver (on AUX1) over pseudo-terminals to the emulators, world at
+    4x: the estimate lands within one cell of the pure-sim run of the same mission."""
+    twins = survey(reduced(TWINS, tmp_path, cache, time_scale=4.0), tmp_path / "twins")
+    sim = survey(
+        reduced(TWINS.with_name("living_room_survey.toml"), tmp_path, cache, None), tmp_path / "sim"
+    )
+    assert math.dist(twins["estimate_m"], sim["estimate_m"]) <= 0.1 + 1e-9
+    assert twins["error_m"] < 0.2
+
+
+def test_serve_hardware_answers_probe_and_the_drivers_commands(tmp_path, capsys):
+    links = tmp_path / "links"
+    server = subprocess.Popen(
+        [
+            sys.executable,
+            "-m",
+            "twin.cli",
+            "serve-hardware",
+            "--seconds",
+            "30",
+            "--time-scale",
+            "4",
+            "--link-dir",
+            str(links),
+        ],
+        stdout=subprocess.PIPE,
+        text=True,
+    )
+    try:
+        assert "serving" in "".join(server.stdout.readline() for _ in range(3))
+        assert (
+            main(
+                [
+                    "hw",
+                    "probe",
+                    "--port",
+                    str(links / "arcos"),
+                    "--port",
+                    str(links / "vcc4"),
+                    "--port",
+                    "/dev/null",
+                ]
+            )
+            == 0
+        )
+        printed = capsys.readouterr().out
+        assert "ARCOS robot 'twin' (Pioneer peoplebot-sh)" in printed
+        assert f"{links / 'vcc4'}: VC-C4 answers" in printed
+        assert "/dev/null: no ARCOS robot and no VC-C4 answers" in printed
+        assert main(["hw", "vcc4", "--port", str(links / "vcc4"), "goto", "-30", "10"]) == 0
+        assert "pan -30.0" in capsys.readouterr().out
+        assert main(["hw", "arcos", "--port", str(links / "arcos"), "status"]) == 0
+        assert "battery" in capsys.readouterr().out
+    finally:
+        server.terminate()
+        server.wait(timeout=10)
+
+
+def test_hardware_configs_name_bad_devices_in_one_line(tmp_path, cache, capsys):
+    text = TWINS.read_text().replace('port = "twin"', 'port = "/dev/no-such-port"')
+    config = tmp_path / "bad.toml"
+    config.write_text(
+        text.replace('file = "living_room.xml"', f'file = "{TWINS.parent / "living_room.xml"}"')
+    )
+    started = time.monotonic()
+    code = main(["survey", "--config", str(config), "--out", str(tmp_path / "o"), "--quiet"])
+    err = capsys.readouterr().err.strip()
+    assert code == 2 and len(err.splitlines()) == 1
+    assert "ARCOS base: open /dev/no-such-port: no such port" in err
+    assert time.monotonic() - started < 30
+
+
+def test_a_line_pulled_mid_mission_is_recovered_and_no_view_is_lost(tmp_path, cache):
+    from twin.config import load_config
+    from twin.detection import prepare_detector
+    from twin.factory import BuildContext, build_robot
+    from twin.grid import AccumulatorGrid
+    from twin.survey import SurveyContext, run_survey
+
+    config = load_config(reduced(TWINS, tmp_path, cache, time_scale=4.0))
+    context = BuildContext(config)
+    robot, context = build_robot(config, context)
+    grid = AccumulatorGrid(["rice_box"], config.grid.spec)
+    detector = prepare_detector(config.objects, config.detector, config.cache, lambda _: None)
+
+    def pull_the_cable(view):
+        if view.index in (5, 14):
+            context.twins.hangup("arcos")  # the head rides on the base's AUX1 line too
+
+    try:
+        with robot:
+            state = run_survey(
+                SurveyContext(robot, detector, grid, config.mission, tmp_path),
+                on_view=pull_the_cable,
+            )
+        reconnects = robot.base.reconnects
+    finally:
+        context.close()
+    assert state.views_done == 24 and grid.views("rice_box") == 24
+    assert reconnects >= 2
+    best = grid.peaks("rice_box", k=1, min_separation=0.5).best
+    assert math.dist((best.x, best.y), (1.5, 5.0)) < 0.2
