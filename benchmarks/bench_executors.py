@@ -1,13 +1,14 @@
 """Executors compared: a 10x Monte Carlo sweep on local processes and on a local Ray cluster.
 
-    python benchmarks/bench_executors.py [--trials 1000] [--workers 2] [--skip-full]
+    python benchmarks/bench_executors.py [--trials 1000] [--workers 2] [--parts 1,2,3]
 
 1. The paper's sweep (11 x 11 settings) with 10x its trials (1,000 per setting), once on the
    local process pool and once on a local Ray cluster, both with ``--workers`` workers; the two
    results are asserted identical, and the wall times printed (cluster start excluded, printed
    apart).
 2. Speed-up against workers (1, 2) for each executor on a 3 x 3 corner of the sweep.
-3. Per-task overhead: wall time per empty task, and per one-trial chunk less a trial's time.
+3. Per-task overhead: wall time per empty task, and the worker time a task costs beyond its
+   trials (1,000 trials as 1,000 one-trial tasks against the same as one task per worker).
 """
 
 from __future__ import annotations
@@ -18,7 +19,7 @@ import time
 import numpy as np
 
 from twin.executors import Executor, ProcessExecutor, RayExecutor
-from twin.montecarlo import SweepConfig, run_setting, run_sweep
+from twin.montecarlo import SweepConfig, run_sweep
 
 
 def _ray(workers: int) -> tuple[RayExecutor, float]:
@@ -96,11 +97,10 @@ def _noop(item: int) -> int:
 
 
 def overhead(tasks: int, workers: int) -> None:
+    """Empty tasks' wall time each, and the worker time a task costs beyond its trials: the
+    same trials as one-trial chunks and as ``workers`` big chunks, the difference per task."""
     print(f"3. per-task overhead: {tasks} tasks, {workers} workers")
     config = SweepConfig(pfp=(0.0,), pfn=(0.0,), trials=tasks)
-    started = time.perf_counter()
-    run_setting(SweepConfig(pfp=(0.0,), pfn=(0.0,), trials=tasks), (0.0, 0.0))
-    per_trial = (time.perf_counter() - started) / tasks
     for name in ("local", "ray"):
         executor: Executor = ProcessExecutor(workers) if name == "local" else _ray(workers)[0]
         try:
@@ -109,14 +109,14 @@ def overhead(tasks: int, workers: int) -> None:
             for _ in executor.map_unordered(_noop, list(range(tasks))):
                 pass
             empty = (time.perf_counter() - started) / tasks
-            _, wall = _sweep(config, executor, 1)
+            _, small = _sweep(config, executor, 1)
+            _, big = _sweep(config, executor, -(-tasks // workers))
         finally:
             executor.close()
-        # a one-trial chunk: wall time x workers (CPU-seconds) per task, less the trial itself
-        chunk_cost = wall * workers / tasks - per_trial
-        print(f"   {name:5s}: empty task {1e3 * empty:.2f} ms of wall time each; one-trial "
-              f"chunk {1e3 * chunk_cost:.2f} ms of worker time beyond the trial's "
-              f"{1e3 * per_trial:.2f} ms", flush=True)  # fmt: skip
+        per_task = (small - big) * workers / (tasks - workers)
+        print(f"   {name:5s}: empty task {1e3 * empty:.2f} ms of wall time each; a task costs "
+              f"{1e3 * per_task:.2f} ms of worker time beyond its trials' "
+              f"({1e3 * big * workers / tasks:.2f} ms per trial)", flush=True)  # fmt: skip
 
 
 def main() -> None:
@@ -124,12 +124,15 @@ def main() -> None:
     parser.add_argument("--trials", type=int, default=1000, help="trials per setting (1000)")
     parser.add_argument("--workers", type=int, default=2)
     parser.add_argument("--chunk", type=int, default=250, help="trials per task (250)")
-    parser.add_argument("--skip-full", action="store_true", help="only parts 2 and 3")
+    parser.add_argument("--parts", default="1,2,3", help="which parts to run (1,2,3)")
     args = parser.parse_args()
-    if not args.skip_full:
+    parts = set(args.parts.split(","))
+    if "1" in parts:
         full_sweep(args.trials, args.workers, args.chunk)
-    speedup(args.trials, args.chunk)
-    overhead(400, args.workers)
+    if "2" in parts:
+        speedup(args.trials, args.chunk)
+    if "3" in parts:
+        overhead(1000, args.workers)
 
 
 if __name__ == "__main__":
