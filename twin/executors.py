@@ -15,6 +15,7 @@ from __future__ import annotations
 import multiprocessing
 import os
 import socket
+import sys
 from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
 from typing import Any, Protocol, TypeVar
@@ -97,9 +98,21 @@ class ProcessExecutor:
         pass
 
 
+# Ray's switch for multi-machine clusters; off, the node uses the loopback address.
+LOOPBACK_SWITCH = "RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER"
+
+
 def _apply(fn: Callable[[Any], Any], item: Any) -> Any:
     """What a Ray task runs: ``fn`` arrives once through the object store, then per item."""
     return fn(item)
+
+
+def _keep_local_cluster_on_loopback() -> None:
+    """Make a local Ray cluster bind and talk on 127.0.0.1 only (see ``RayExecutor``)."""
+    os.environ[LOOPBACK_SWITCH] = "0"
+    constants = sys.modules.get("ray._private.ray_constants")
+    if constants is not None:  # ray was imported before: its constant is already read
+        constants.ENABLE_RAY_CLUSTER = False
 
 
 def _import_ray():
@@ -121,13 +134,17 @@ class RayExecutor:
     no dashboard and a small object store, and shuts it down on ``close``. A Ray session that is
     already initialised in this process (tests, notebooks) is used as it is.
 
-    Ray's servers listen on all interfaces even for a local cluster (it maps 127.0.0.1 to the
-    node's address on purpose), so run it on a trusted network only (docs/cluster.md).
+    A local cluster is kept on loopback: Ray maps 127.0.0.1 to the node's network address
+    unless told the cluster is single-machine (``RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER=0``, read
+    when ray is imported), so that is set before the import. A joined cluster listens on the
+    network: run it on a trusted network only (docs/cluster.md).
     """
 
     def __init__(self, workers: int | None = None, address: str | None = None) -> None:
         if workers is not None and workers < 1:
             raise InputError(f"--workers must be at least 1, got {workers}")
+        if address is None:
+            _keep_local_cluster_on_loopback()
         ray = _import_ray()
         self._ray = ray
         self._owns_session = False
