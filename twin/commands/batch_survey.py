@@ -38,8 +38,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="range of the light-intensity scale (default 0.5,1.5; 1 is the scene's)",
     )  # fmt: skip
     parser.add_argument(
-        "--threshold", type=numbers(2, "LOW,HIGH thresholds"), default=(0.0, 0.5),
-        help="range of the detector threshold: patch scores below it read 0 (default 0,0.5)",
+        "--threshold", type=numbers(2, "LOW,HIGH thresholds"), default=(0.0, 0.25),
+        help="range of the detector threshold: patch scores below it read 0 (default 0,0.25)",
     )  # fmt: skip
     parser.add_argument(
         "--tolerance", type=float, default=0.3, help="success radius in metres (0.3)"
