@@ -13,7 +13,7 @@ from twin.montecarlo import SweepConfig, plan_chunks, run_sweep
 
 pytest.importorskip("ray")
 
-from tests.test_batch import deterministic, spec_for, tiny_config
+from test_batch import deterministic, spec_for, tiny_config
 
 
 @pytest.fixture(scope="module")
