@@ -1,0 +1,66 @@
+"""The survey's detector: scene objects trained together on one codebook, and cached."""
+
+import numpy as np
+import pytest
+
+import twin.sim
+from twin.config import ObjectConfig
+from twin.detection import prepare_detector
+from twin.rfch import RFCH
+
+COLOURS = {"red_box": (200, 30, 30), "blue_box": (30, 40, 210)}
+
+
+def synthetic_views(target, scene):
+    """Two views of a coloured square on grey clutter, with exact masks."""
+    rng = np.random.default_rng(len(target))
+    images, masks = [], []
+    for offset in (40, 120):
+        image = rng.integers(90, 140, (240, 320, 3), dtype=np.uint8)
+        mask = np.zeros((240, 320), bool)
+        mask[80:140, offset : offset + 60] = True
+        image[mask] = COLOURS[target]
+        images.append(image)
+        masks.append(mask)
+    return np.array(images), np.array(masks)
+
+
+@pytest.fixture
+def counted_training(monkeypatch):
+    calls = []
+
+    def training_views(target=None, scene="training_stage", **_):
+        calls.append(target)
+        return synthetic_views(target, scene)
+
+    monkeypatch.setattr(twin.sim, "training_views", training_views)
+    return calls
+
+
+PARAMS = {"n_clusters": 8}
+
+
+def test_scene_objects_share_one_codebook_and_are_cached(tmp_path, counted_training):
+    objects = [ObjectConfig(name, None, name) for name in COLOURS]
+    detector = prepare_detector(objects, PARAMS, tmp_path, say=lambda _: None)
+    assert detector.names == list(COLOURS)
+    assert len({model.codebook_key for model in detector.models}) == 1
+    assert sorted(counted_training) == sorted(COLOURS)
+    again = prepare_detector(objects, PARAMS, tmp_path, say=lambda _: None)
+    assert sorted(counted_training) == sorted(COLOURS)  # loaded from the cache: no training
+    frame, _ = synthetic_views("blue_box", "")
+    np.testing.assert_array_equal(again.scores(frame[0]), detector.scores(frame[0]))
+    scores = detector.scores(frame[0])
+    columns = scores.max(axis=1)
+    blue = detector.names.index("blue_box")
+    assert columns[blue].max() > columns[1 - blue].max()
+
+
+def test_model_files_and_a_lone_scene_object_mix(tmp_path, counted_training):
+    images, masks = synthetic_views("red_box", "")
+    path = tmp_path / "red.npz"
+    RFCH.train("red_box", list(images), list(masks), **PARAMS).save(path)
+    objects = [ObjectConfig("red_box", path, None), ObjectConfig("blue_box", None, "blue_box")]
+    detector = prepare_detector(objects, PARAMS, tmp_path / "cache", say=lambda _: None)
+    assert detector.names == ["red_box", "blue_box"]
+    assert counted_training == ["blue_box"]
