@@ -47,7 +47,7 @@ import numpy as np
 
 from twin.errors import InputError, TwinError
 from twin.executors import Executor
-from twin.store import write_text_atomic
+from twin.store import JsonLinesJournal, json_safe, write_text_atomic
 
 VARY = ("target", "lighting", "threshold")
 _FACTOR_KEY = {name: k for k, name in enumerate(VARY)}
@@ -290,7 +290,7 @@ def run_mission(spec: BatchSpec, run: int) -> dict[str, Any]:
         "run": run,
         "lighting": draw.lighting,
         "threshold": draw.threshold,
-        "objects": _finite(objects),
+        "objects": json_safe(objects),
         "views": state.views_done,
         "timings_s": {
             "setup": round(setup, 3),
@@ -302,16 +302,6 @@ def run_mission(spec: BatchSpec, run: int) -> dict[str, Any]:
     }
 
 
-def _finite(value: Any) -> Any:
-    if isinstance(value, float) and not math.isfinite(value):
-        return None
-    if isinstance(value, dict):
-        return {k: _finite(v) for k, v in value.items()}
-    if isinstance(value, list | tuple):
-        return [_finite(v) for v in value]
-    return value
-
-
 # -- the batch, resumably ----------------------------------------------------------------------
 
 
@@ -321,45 +311,16 @@ class BatchJournal:
 
     def __init__(self, path: Path, spec: BatchSpec, fresh: bool = False) -> None:
         self.path = path
+        self._journal = JsonLinesJournal(path, "batch", spec.identity(), fresh)
         self.done: dict[int, dict[str, Any]] = {}
-        identity = spec.identity()
-        if path.exists() and not fresh:
-            self._read(identity)
-        else:
-            path.parent.mkdir(parents=True, exist_ok=True)
-            with path.open("w", encoding="utf-8") as handle:
-                handle.write(json.dumps({"batch": identity}) + "\n")
-
-    def _read(self, identity: dict[str, Any]) -> None:
-        text = self.path.read_text(encoding="utf-8")
-        if text and not text.endswith("\n"):  # end a line torn by a crash: appends start anew
-            with self.path.open("a", encoding="utf-8") as handle:
-                handle.write("\n")
-        lines = text.splitlines()
-        try:
-            recorded = json.loads(lines[0])["batch"]
-        except (IndexError, KeyError, TypeError, json.JSONDecodeError):
-            raise InputError(
-                f"{self.path} is not a batch journal; choose another --out or pass --fresh"
-            ) from None
-        if recorded != identity:
-            changed = sorted(k for k in identity if recorded.get(k) != identity[k])
-            raise InputError(
-                f"{self.path.parent} holds a batch with other parameters ({', '.join(changed)}); "
-                "choose another --out, or pass --fresh to discard it"
-            )
-        for line in lines[1:]:
+        for entry in self._journal.entries:
             try:
-                entry = json.loads(line)
                 self.done[int(entry["run"])] = entry
             except (KeyError, TypeError, ValueError):
                 continue
 
     def record(self, result: dict[str, Any]) -> None:
-        with self.path.open("a", encoding="utf-8") as handle:
-            handle.write(json.dumps(result) + "\n")
-            handle.flush()
-            os.fsync(handle.fileno())
+        self._journal.append(result)
         self.done[int(result["run"])] = result
 
 

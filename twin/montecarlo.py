@@ -23,9 +23,7 @@ from __future__ import annotations
 
 import csv
 import io
-import json
 import math
-import os
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
 from functools import partial
@@ -38,7 +36,7 @@ from twin.coverage import add_coverage
 from twin.errors import InputError
 from twin.executors import Executor
 from twin.fusion import RULES, logodds_weights
-from twin.store import write_text_atomic
+from twin.store import JsonLinesJournal, write_text_atomic
 
 DEFAULT_RATES: tuple[float, ...] = tuple(round(0.1 * i, 1) for i in range(11))
 # Indices of the rules inside the trial kernel's state; the order is fixed.
@@ -394,44 +392,19 @@ class SweepJournal:
         self.config = config
         self.done: dict[tuple[float, float], SettingResult] = {}
         self.partial: dict[tuple[float, float], list[ChunkResult]] = {}
-        identity = _identity(config)
+        self._journal: JsonLinesJournal | None = None
         if path is None:
             return
-        if path.exists() and not fresh:
-            self._read(identity)
-        else:
-            path.parent.mkdir(parents=True, exist_ok=True)
-            with path.open("w", encoding="utf-8") as handle:
-                handle.write(json.dumps({"sweep": identity}) + "\n")
-
-    def _read(self, identity: dict[str, object]) -> None:
-        text = self.path.read_text(encoding="utf-8")
-        if text and not text.endswith("\n"):  # end a line torn by a crash: appends start anew
-            with self.path.open("a", encoding="utf-8") as handle:
-                handle.write("\n")
-        lines = text.splitlines()
-        try:
-            recorded = json.loads(lines[0])["sweep"]
-        except (IndexError, KeyError, TypeError, json.JSONDecodeError):
-            raise InputError(
-                f"{self.path} is not a sweep journal; choose another --out or pass --fresh"
-            ) from None
-        if recorded != identity:
-            changed = sorted(k for k in identity if recorded.get(k) != identity[k])
-            raise InputError(
-                f"{self.path.parent} holds a sweep with other parameters ({', '.join(changed)}); "
-                "choose another --out, or pass --fresh to discard it"
-            )
-        shape = (len(KERNEL_RULES), len(self.config.checkpoints))
-        for line in lines[1:]:
+        self._journal = JsonLinesJournal(path, "sweep", _identity(config), fresh)
+        shape = (len(KERNEL_RULES), len(config.checkpoints))
+        for entry in self._journal.entries:
             try:
-                entry = json.loads(line)
-                start, stop = entry.get("trials", (0, self.config.trials))
+                start, stop = entry.get("trials", (0, config.trials))
                 chunk = Chunk(float(entry["pfp"]), float(entry["pfn"]), int(start), int(stop))
                 successes = np.asarray(entry["successes"], dtype=np.int64)
             except (AttributeError, KeyError, TypeError, ValueError):
-                continue  # a torn last line: those trials run again
-            if successes.shape == shape and 0 <= chunk.start < chunk.stop <= self.config.trials:
+                continue  # not a chunk: those trials run again
+            if successes.shape == shape and 0 <= chunk.start < chunk.stop <= config.trials:
                 self._add(ChunkResult(chunk, successes))
 
     def _add(self, result: ChunkResult) -> SettingResult | None:
@@ -472,11 +445,8 @@ class SweepJournal:
             "trials": [chunk.start, chunk.stop],
             "successes": result.successes.tolist(),
         }
-        if self.path is not None:
-            with self.path.open("a", encoding="utf-8") as handle:
-                handle.write(json.dumps(entry) + "\n")
-                handle.flush()
-                os.fsync(handle.fileno())
+        if self._journal is not None:
+            self._journal.append(entry)
         return self._add(result)
 
 

@@ -7,7 +7,6 @@
 from __future__ import annotations
 
 import json
-import math
 import sys
 import time
 from pathlib import Path
@@ -20,7 +19,7 @@ from twin.errors import InputError, TwinError
 from twin.grid import AccumulatorGrid
 from twin.plots import grid_figure
 from twin.record import NullRecorder, Recorder, RerunRecorder, SceneInfo
-from twin.store import write_text_atomic
+from twin.store import json_safe, write_text_atomic
 from twin.survey import CHECKPOINT_GRID, SurveyContext, estimates, plan_views, run_survey
 
 RESULT_FILE = "result.json"
@@ -121,19 +120,8 @@ def _fly(config, robot, context, out, options, resume, started, quiet) -> dict[s
             estimate=tuple(entry["estimate_m"]),
             truth=tuple(entry["truth_m"]) if "truth_m" in entry else None,
         )
-    write_text_atomic(out / RESULT_FILE, json.dumps(_finite(result), indent=1))
+    write_text_atomic(out / RESULT_FILE, json.dumps(json_safe(result), indent=1))
     return result
-
-
-def _finite(value: Any) -> Any:
-    """JSON has no inf or nan: write them as null."""
-    if isinstance(value, float) and not math.isfinite(value):
-        return None
-    if isinstance(value, dict):
-        return {k: _finite(v) for k, v in value.items()}
-    if isinstance(value, list | tuple):
-        return [_finite(v) for v in value]
-    return value
 
 
 def _place_target_randomly(config: SurveyConfig, context, seed: int) -> None:

@@ -8,6 +8,7 @@ and ``allow_pickle=False`` is enough to read it safely.
 from __future__ import annotations
 
 import json
+import math
 import os
 import tempfile
 import zipfile
@@ -17,7 +18,7 @@ from typing import IO, Any
 
 import numpy as np
 
-from twin.errors import FileFormatError
+from twin.errors import FileFormatError, InputError
 
 _HEADER_KEY = "__header__"
 
@@ -103,3 +104,68 @@ def load_arrays(
             f"(this version of twin reads version {version}); re-create the file"
         )
     return header, arrays
+
+
+def json_safe(value: Any) -> Any:
+    """``value`` with every non-finite float as None: JSON has no inf or nan."""
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    if isinstance(value, dict):
+        return {k: json_safe(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [json_safe(v) for v in value]
+    return value
+
+
+class JsonLinesJournal:
+    """An append-only record of finished work, so an interrupted run resumes where it stopped.
+
+    The first line names what is recorded (``kind``) and the parameters that decide its results
+    (``identity``); each further line is one finished piece, flushed to disk as it arrives. A
+    journal of another kind, or of other parameters, is refused in one line; a last line torn
+    by a crash is skipped (that piece simply runs again) and ended, so appends start anew.
+    ``entries`` holds the readable pieces, in order.
+    """
+
+    def __init__(self, path: Path, kind: str, identity: dict[str, Any], fresh: bool = False):
+        self.path = path
+        self.entries: list[dict[str, Any]] = []
+        if path.exists() and not fresh:
+            self._read(kind, identity)
+        else:
+            path.parent.mkdir(parents=True, exist_ok=True)
+            with path.open("w", encoding="utf-8") as handle:
+                handle.write(json.dumps({kind: identity}) + "\n")
+
+    def _read(self, kind: str, identity: dict[str, Any]) -> None:
+        text = self.path.read_text(encoding="utf-8")
+        if text and not text.endswith("\n"):
+            with self.path.open("a", encoding="utf-8") as handle:
+                handle.write("\n")
+        lines = text.splitlines()
+        try:
+            recorded = json.loads(lines[0])[kind]
+        except (IndexError, KeyError, TypeError, json.JSONDecodeError):
+            raise InputError(
+                f"{self.path} is not a {kind} journal; choose another --out or pass --fresh"
+            ) from None
+        if recorded != identity:
+            changed = sorted(k for k in identity if recorded.get(k) != identity[k])
+            raise InputError(
+                f"{self.path.parent} holds a {kind} with other parameters ({', '.join(changed)}); "
+                "choose another --out, or pass --fresh to discard it"
+            )
+        for line in lines[1:]:
+            try:
+                entry = json.loads(line)
+            except json.JSONDecodeError:
+                continue
+            if isinstance(entry, dict):
+                self.entries.append(entry)
+
+    def append(self, entry: dict[str, Any]) -> None:
+        with self.path.open("a", encoding="utf-8") as handle:
+            handle.write(json.dumps(entry) + "\n")
+            handle.flush()
+            os.fsync(handle.fileno())
+        self.entries.append(entry)
