@@ -18,9 +18,9 @@ are JPEG-compressed and the viewer gets a memory limit, so long runs stay bounde
 from __future__ import annotations
 
 import math
-import shutil
 import socket
 import subprocess
+import sys
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -67,7 +67,13 @@ class Recorder(Protocol):
 
     def log_view(self, record: ViewRecord, grid: AccumulatorGrid) -> None: ...
 
-    def end(self) -> None: ...
+    def end(self) -> None:
+        """Flush and close the recording (the mission is over)."""
+        ...
+
+    def wait(self) -> None:
+        """After the results are written: keep serving viewers if that is the mode."""
+        ...
 
 
 class NullRecorder:
@@ -80,6 +86,9 @@ class NullRecorder:
         pass
 
     def end(self) -> None:
+        pass
+
+    def wait(self) -> None:
         pass
 
 
@@ -124,7 +133,7 @@ class RerunRecorder:
         self.url: str | None = None
         self._server: subprocess.Popen[bytes] | None = None
         self.stream = rr.RecordingStream(application_id, recording_id=recording_id)
-        blueprint = self._blueprint([])
+        blueprint = self._blueprint()
         if mode == "save":
             if path is None:
                 raise TwinError("Rerun 'save' mode needs a file path")
@@ -138,14 +147,14 @@ class RerunRecorder:
         else:
             raise TwinError(f"unknown Rerun mode {mode!r}; use save, spawn, serve or off")
         self._path: list[tuple[float, float]] = []
-        self._peak_series: set[str] = set()
 
     def _start_server(self, bind: str, port: int) -> str:
-        executable = shutil.which("rerun")
-        if executable is None:
-            raise TwinError("the 'rerun' program is not on PATH; reinstall rerun-sdk")
+        # The viewer binary ships in rerun-sdk: run it with this interpreter, so an
+        # unactivated virtual environment works too.
         command = [
-            executable,
+            sys.executable,
+            "-m",
+            "rerun",
             "--serve-grpc",
             "--bind",
             bind,
@@ -168,7 +177,7 @@ class RerunRecorder:
         self._server.terminate()
         raise TwinError(f"the Rerun server on {bind}:{port} did not start within 10 s")
 
-    def _blueprint(self, objects: list[str]):
+    def _blueprint(self):
         import rerun.blueprint as rrb
 
         return rrb.Blueprint(
@@ -233,9 +242,11 @@ class RerunRecorder:
             rr.Boxes3D(centers=[[0, 0, 0.6]], half_sizes=[[0.25, 0.2, 0.6]], colors=[90, 90, 200]),
         )
         self._path.append((pose.x, pose.y))
+        # Static: only the newest path is kept, so a long run's memory grows linearly.
         log(
             "world/path",
             rr.LineStrips3D([[[x, y, 0.01] for x, y in self._path]], colors=[90, 90, 200]),
+            static=True,
         )
         self._log_camera(record)
         for name, values in record.column_values.items():
@@ -245,12 +256,19 @@ class RerunRecorder:
     def end(self) -> None:
         self.stream.flush()
         self.stream.disconnect()
-        if self._server is not None and self.mode == "serve":
-            print(f"Rerun server still serving at {self.url}; stop it with Ctrl-C")
-            try:
-                self._server.wait()
-            except KeyboardInterrupt:
-                self._server.terminate()
+
+    def wait(self) -> None:
+        """In ``serve`` mode the server holds the recording for viewers until Ctrl-C."""
+        if self._server is None:
+            return
+        print(f"Rerun server serving the recording at {self.url}; stop it with Ctrl-C", flush=True)
+        try:
+            self._server.wait()
+        except KeyboardInterrupt:
+            pass
+        finally:
+            self._server.terminate()
+            self._server.wait(timeout=5)
 
     # -- pieces --------------------------------------------------------------------------------
 

@@ -9,6 +9,7 @@ from __future__ import annotations
 import json
 import sys
 import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -27,9 +28,17 @@ RECORDING_FILE = "recording.rrd"
 
 
 def run_mission(
-    out: Path, options: dict[str, Any], resume: bool, started: float, quiet: bool = False
+    out: Path,
+    options: dict[str, Any],
+    resume: bool,
+    started: float,
+    quiet: bool = False,
+    on_result: Callable[[dict[str, Any]], None] | None = None,
 ) -> dict[str, Any]:
-    """Run or resume the survey in ``out``; returns (and writes) ``result.json``'s content."""
+    """Run or resume the survey in ``out``; returns (and writes) ``result.json``'s content.
+
+    ``on_result`` sees the result as soon as it is written, before a ``serve`` recorder keeps
+    serving viewers until Ctrl-C."""
     from twin.factory import BuildContext, build_robot, uses_sim_world
 
     config = load_config(
@@ -45,12 +54,12 @@ def run_mission(
         _place_target_randomly(config, context, int(options.get("seed", 0)))
     robot, context = build_robot(config, context)
     try:
-        return _fly(config, robot, context, out, options, resume, started, quiet)
+        return _fly(config, robot, context, out, options, resume, started, quiet, on_result)
     finally:
         context.close()
 
 
-def _fly(config, robot, context, out, options, resume, started, quiet) -> dict[str, Any]:
+def _fly(config, robot, context, out, options, resume, started, quiet, on_result) -> dict[str, Any]:
     """The run proper, once the devices (and any serial twins) exist."""
     from twin.detection import prepare_detector
 
@@ -121,6 +130,9 @@ def _fly(config, robot, context, out, options, resume, started, quiet) -> dict[s
             truth=tuple(entry["truth_m"]) if "truth_m" in entry else None,
         )
     write_text_atomic(out / RESULT_FILE, json.dumps(json_safe(result), indent=1))
+    if on_result is not None:
+        on_result(result)
+    recorder.wait()
     return result
 
 

@@ -67,11 +67,14 @@ def run(args: argparse.Namespace) -> int:
         out, options = _fresh_options(args)
     from twin.run import run_mission
 
-    result = run_mission(
-        out, options, resume=args.resume is not None, started=started, quiet=args.quiet
+    run_mission(
+        out,
+        options,
+        resume=args.resume is not None,
+        started=started,
+        quiet=args.quiet,
+        on_result=None if args.quiet else lambda result: _print_summary(out, result),
     )
-    if not args.quiet:
-        _print_summary(out, result)
     return 0
 
 
