@@ -24,22 +24,9 @@ import time
 from hardware.arcos import ArcosBase
 from hardware.arcos_codec import Command
 from twin.serial_twins.arcos import serve_arcos
+from twin.serial_twins.bytedevice import EchoDevice
 from twin.serial_twins.runner import WorldRunner
 from twin.sim import make_sim_robot
-
-
-class Echo:
-    """AUX1 device that sends back what it gets."""
-
-    def __init__(self) -> None:
-        self.pending = bytearray()
-
-    def receive(self, data: bytes, now: float) -> None:
-        self.pending += data
-
-    def transmit(self, now: float) -> bytes:
-        out, self.pending = bytes(self.pending), bytearray()
-        return out
 
 
 def _ms(values: list[float]) -> str:
@@ -58,7 +45,7 @@ def main() -> None:
 
     sim, _ = make_sim_robot("living_room")
     with WorldRunner(sim, args.time_scale):
-        server = serve_arcos(sim, aux1=Echo())
+        server = serve_arcos(sim, aux1=EchoDevice())
         with ArcosBase.open(server.path) as base:
             base.send(Command.RVEL, 10)
             base.send(Command.VEL, 50)

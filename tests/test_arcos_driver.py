@@ -21,26 +21,17 @@ from twin.devices import (
 )
 from twin.geometry import Pose2D
 from twin.serial_twins.arcos import ArcosServer, KinematicActuator, serve_arcos
+from twin.serial_twins.bytedevice import EchoDevice
 from twin.serial_twins.pty import PtyLink
 
 SCALE = 4.0  # the kinematic robot's clock runs this much faster than the wall
 
 
-class Echo:
-    def __init__(self) -> None:
-        self.pending = bytearray()
-
-    def receive(self, data: bytes, now: float) -> None:
-        self.pending += data
-
-    def transmit(self, now: float) -> bytes:
-        out, self.pending = bytes(self.pending), bytearray()
-        return out
 
 
 @pytest.fixture
 def server(tmp_path: Path) -> Iterator[ArcosServer]:
-    srv = serve_arcos(KinematicActuator(SCALE), PtyLink(tmp_path / "arcos"), aux1=Echo())
+    srv = serve_arcos(KinematicActuator(SCALE), PtyLink(tmp_path / "arcos"), aux1=EchoDevice())
     yield srv
     srv.stop()
 

@@ -21,20 +21,7 @@ from hardware.arcos_codec import (
 )
 from twin.devices import ProtocolError
 from twin.serial_twins.arcos import ArcosEmulator, KinematicActuator
-
-
-class Echo:
-    """An AUX1 device that answers every byte with itself."""
-
-    def __init__(self) -> None:
-        self.pending = bytearray()
-
-    def receive(self, data: bytes, now: float) -> None:
-        self.pending += data
-
-    def transmit(self, now: float) -> bytes:
-        out, self.pending = bytes(self.pending), bytearray()
-        return out
+from twin.serial_twins.bytedevice import EchoDevice
 
 
 def packets(data: bytes) -> list[bytes]:
@@ -52,7 +39,7 @@ def exchange(emu: ArcosEmulator, data: bytes, now: float) -> list[bytes]:
     return packets(emu.transmit(now))
 
 
-def opened(aux1: Echo | None = None, scale: float = 1.0) -> tuple[ArcosEmulator, float]:
+def opened(aux1: EchoDevice | None = None, scale: float = 1.0) -> tuple[ArcosEmulator, float]:
     emu = ArcosEmulator(KinematicActuator(scale), aux1, name="MyBot")
     now = time.monotonic()
     for step in (0, 1, 2):
@@ -187,7 +174,7 @@ def test_watchdog_halts_after_two_silent_seconds_and_resumes_on_traffic() -> Non
 
 
 def test_aux_tunnel_getaux_waits_for_n_bytes() -> None:
-    echo = Echo()
+    echo = EchoDevice()
     emu, now = opened(echo)
     assert exchange(emu, command(Command.GETAUX, 6), now) == []
 

@@ -18,3 +18,18 @@ class ByteDevice(Protocol):
     def transmit(self, now: float) -> bytes:
         """The bytes the device has sent by ``now`` and nobody has taken yet (taken now)."""
         ...
+
+
+class EchoDevice:
+    """A device that sends back every byte it gets: a loopback plug for testing a carrier
+    (e.g. the ARCOS AUX tunnel) without any protocol on top."""
+
+    def __init__(self) -> None:
+        self.pending = bytearray()
+
+    def receive(self, data: bytes, now: float) -> None:
+        self.pending += data
+
+    def transmit(self, now: float) -> bytes:
+        out, self.pending = bytes(self.pending), bytearray()
+        return out
