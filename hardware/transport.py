@@ -14,7 +14,7 @@ from typing import Protocol
 
 import serial
 
-from twin.devices import ConnectionLostError, DeviceError, NotConnectedError
+from twin.devices import ConnectionLostError, DeviceError
 
 
 class Transport(Protocol):
@@ -105,9 +105,6 @@ class SerialTransport:
     def close(self) -> None:
         self._serial.close()
 
-    def require_open(self, asked: str) -> None:
-        if not self._serial.is_open:
-            raise NotConnectedError(self.name, asked, f"{self.port} is closed", "connect first")
 
 
 def _open_error(name: str, port: str, exc: serial.SerialException) -> DeviceError:

@@ -343,24 +343,26 @@ def test_bad_configs_are_one_line_errors_naming_the_key(
     assert match in err and len(err.splitlines()) == 1
 
 
-def test_unknown_keys_devices_and_broken_toml_are_named(tmp_path, model_cache):
-    good = write_config(tmp_path, model_cache).read_text()
-    for text, match in [
-        (good.replace("[mission]", "[mission]\nstopz = 1"), "mission.stopz: unknown key"),
-        (good.replace('type = "sim"', 'type = "warp"', 1), "robot.camera.type: unknown type"),
-        (good.replace("[grid]", "[grid\n"), "not valid TOML"),
-    ]:
-        path = tmp_path / "bad.toml"
-        path.write_text(text)
-        if "type" in match:
-            from twin.factory import build_robot
+@pytest.mark.parametrize(
+    ("edit", "match"),
+    [(("[mission]", "[mission]\nstopz = 1"), "mission.stopz: unknown key"),
+     (("[grid]", "[grid\n"), "not valid TOML")],
+)
+def test_unknown_keys_and_broken_toml_are_named(tmp_path, model_cache, edit, match):
+    path = tmp_path / "bad.toml"
+    path.write_text(write_config(tmp_path, model_cache).read_text().replace(*edit))
+    with pytest.raises(ConfigError, match=match):
+        load_config(path)
 
-            with pytest.raises(InputError, match=match):
-                build_robot(load_config(path))
-        else:
-            with pytest.raises(ConfigError, match=match):
-                load_config(path)
 
+def test_an_unknown_device_type_is_named_with_the_known_ones(tmp_path, model_cache):
+    from twin.factory import build_robot
+
+    path = tmp_path / "bad.toml"
+    text = write_config(tmp_path, model_cache).read_text()
+    path.write_text(text.replace('type = "sim"', 'type = "warp"', 1))
+    with pytest.raises(InputError, match=r"robot\.camera\.type: unknown type 'warp'; use one of"):
+        build_robot(load_config(path))
 
 def test_folders_are_never_overwritten_and_resume_needs_a_run(tmp_path, reduced_run, capsys):
     assert main(["survey", "--out", str(reduced_run), "--quiet"]) == 2

@@ -38,7 +38,7 @@ import tempfile
 import time
 import tomllib
 from collections.abc import Callable, Sequence
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 from functools import partial
 from pathlib import Path
 from typing import Any
@@ -500,10 +500,3 @@ def _success_vs(path: Path, rows: list[dict[str, Any]], key: str) -> Path:
     ax.set_ylabel("success (%)")
     ax.set_ylim(0, 110)
     return save_figure(fig, path)
-
-
-def spec_dict(spec: BatchSpec) -> dict[str, Any]:
-    """The spec without the config text (for printing)."""
-    out = asdict(spec)
-    out.pop("config_text")
-    return out

@@ -82,14 +82,6 @@ class GridSpec:
             self.y_min + (row + 0.5) * self.cell_size,
         )
 
-    def cell_of(self, x: float, y: float) -> tuple[int, int]:
-        """(row, col) of the cell holding the point; ``InputError`` if it is off the grid."""
-        col = math.floor((x - self.x_min) / self.cell_size)
-        row = math.floor((y - self.y_min) / self.cell_size)
-        if not (0 <= row < self.ny and 0 <= col < self.nx):
-            raise InputError(f"point ({x:g}, {y:g}) m lies outside the grid")
-        return row, col
-
 
 @dataclass(frozen=True)
 class Peak:

@@ -27,7 +27,7 @@ from twin.devices import PanTiltLimits, Robot
 from twin.errors import TwinError
 from twin.geometry import Pose2D, wrap_angle
 from twin.grid import AccumulatorGrid
-from twin.record import NullRecorder, Recorder, SceneInfo, ViewRecord
+from twin.record import NullRecorder, Recorder, ViewRecord
 from twin.store import write_text_atomic
 
 CHECKPOINT_GRID = "checkpoint/grid.npz"
@@ -247,7 +247,3 @@ def estimates(
             entry["error_m"] = round(math.hypot(best.x - tx, best.y - ty), 4)
         out[name] = entry
     return out
-
-
-def scene_furniture(scene: SceneInfo) -> list[tuple[str, np.ndarray]]:
-    return [(f.name, f.polygon) for f in scene.furniture]

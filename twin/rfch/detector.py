@@ -66,10 +66,6 @@ class Detector:
         """(cols, 2) pixel spans [u0, u1] of the patch columns, for ``CameraModel.wedges``."""
         return self.grid.column_spans(width)
 
-    def column_edges(self, width: int) -> np.ndarray:
-        """Left and right pixel edge of each patch column: the same as ``column_spans``."""
-        return self.column_spans(width)
-
     def scores(self, image: np.ndarray, timings: dict[str, float] | None = None) -> np.ndarray:
         """(objects, rows, cols) float32 degrees of match in [0, 1].
 

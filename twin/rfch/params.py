@@ -72,11 +72,6 @@ class PatchGrid:
         starts = self.starts(width).astype(float)
         return np.stack([starts, starts + self.size], axis=1)
 
-    def row_spans(self, height: int) -> np.ndarray:
-        """(rows, 2) float array of [v0, v1] pixel spans (row 0 at the top of the frame)."""
-        starts = self.starts(height).astype(float)
-        return np.stack([starts, starts + self.size], axis=1)
-
     def boxes(self, frame_shape: tuple[int, ...]) -> np.ndarray:
         """(rows, columns, 4) int array of patch boxes [x0, y0, x1, y1] in pixels, half-open."""
         ys = self.starts(frame_shape[0])
