@@ -137,7 +137,7 @@ def test_a_robot_that_stops_answering_is_a_timeout_not_a_hang(server: ArcosServe
         t0 = time.monotonic()
         with pytest.raises(DeviceTimeoutError, match="no SIP"):
             base.go_to(Pose2D(1.0, 0.0, 0.0), timeout=30.0)
-        assert time.monotonic() - t0 < 2.0
+        assert time.monotonic() - t0 < 10.0  # the 2 s SIP timeout, not go_to's 30 s
         with pytest.raises(DeviceTimeoutError):
             base.pose()
 
@@ -148,7 +148,7 @@ def test_handshake_with_a_silent_robot_times_out(server: ArcosServer) -> None:
     t0 = time.monotonic()
     with pytest.raises(DeviceTimeoutError, match="SYNC0"):
         base.connect()
-    assert time.monotonic() - t0 < 1.5 and not base.is_connected
+    assert time.monotonic() - t0 < 5.0 and not base.is_connected  # 3 x 0.2 s, not a hang
 
 
 def test_stall_during_motion_is_a_fault(server: ArcosServer) -> None:
@@ -197,7 +197,7 @@ def test_aux_tunnel_round_trip(server: ArcosServer) -> None:
         aux.write(b"abc")  # a shorter answer than asked for still gets through
         t0 = time.monotonic()
         assert aux.read(6, 0.8) == b"abc"
-        assert 0.7 < time.monotonic() - t0 < 1.5
+        assert 0.7 < time.monotonic() - t0 < 5.0  # waited out its 0.8 s, then returned
         aux.write(b"stale")
         time.sleep(0.1)
         aux.reset_input()

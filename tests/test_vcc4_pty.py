@@ -90,7 +90,7 @@ def test_a_silent_camera_is_a_timeout_not_a_hang(server: VCC4Server) -> None:
         start = time.monotonic()
         with pytest.raises(DeviceTimeoutError, match=r"no answer within 0\.3 s"):
             camera.position()
-        assert time.monotonic() - start < 1.5
+        assert time.monotonic() - start < 5.0  # 0.3 s answer timeouts, not a hang
         server.emulator.faults.silent = False
         assert camera.position() == pytest.approx((0.0, 0.0), abs=TOLERANCE)
 
