@@ -18,8 +18,8 @@ import time
 
 import numpy as np
 
-from twin.executors import Executor, ProcessExecutor, RayExecutor
-from twin.montecarlo import SweepConfig, run_sweep
+from twin.app.executors import Executor, ProcessExecutor, RayExecutor
+from twin.app.montecarlo import SweepConfig, run_sweep
 
 
 def _ray(workers: int) -> tuple[RayExecutor, float]:

@@ -13,7 +13,7 @@ import time
 
 import numpy as np
 
-from twin.grid import AccumulatorGrid, GridSpec
+from twin.core.grid import AccumulatorGrid, GridSpec
 
 
 def fuse_time_us(cells: int, supersample: int, columns: int, repeats: int = 300) -> float:

@@ -17,8 +17,8 @@ import tempfile
 import time
 from pathlib import Path
 
+from twin.app.montecarlo import SweepConfig, run_trial
 from twin.cli import main as twin_main
-from twin.montecarlo import SweepConfig, run_trial
 
 
 def peak_rss_mib(who: int) -> float:

@@ -15,7 +15,7 @@ import time
 
 import numpy as np
 
-from twin.geometry import Pose2D
+from twin.core.geometry import Pose2D
 from twin.sim.robot import SimRobot  # twin.sim selects headless EGL unless MUJOCO_GL is set
 from twin.sim.sheet import LIVING_ROOM_STOPS
 from twin.sim.world import World

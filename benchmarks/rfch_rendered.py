@@ -17,14 +17,14 @@ import math
 
 import numpy as np
 
-from twin.config import load_config
-from twin.detection import prepare_detector
-from twin.geometry import Pose2D
+from twin.app.config import load_config
+from twin.app.detection import prepare_detector
+from twin.app.survey import column_values, plan_views
+from twin.core.geometry import Pose2D
 from twin.rfch.roc import column_truth, roc_curve
 from twin.sim import SimRobot, World
 from twin.sim.render import FrameRenderer
 from twin.sim.robot import CAMERA_NAME, ROBOT_CLEARANCE
-from twin.survey import column_values, plan_views
 
 
 def body_mask(world: World, segment: np.ndarray, body: str) -> np.ndarray:

@@ -15,8 +15,8 @@ import statistics
 import tempfile
 from pathlib import Path
 
+from twin.app.config import default_config_path
 from twin.cli import main as twin_main
-from twin.config import default_config_path
 
 
 def main() -> None:

@@ -1,4 +1,4 @@
-"""The PeopleBot's base over its ARCOS serial protocol, as a ``twin.devices.Base``.
+"""The PeopleBot's base over its ARCOS serial protocol, as a ``twin.core.devices.Base``.
 
 ``ArcosBase.open("/dev/ttyS0")`` returns an unconnected base; ``connect()`` (or ``with``) runs
 the SYNC0/1/2 handshake (closing a robot left open by a crashed client first), OPENs the
@@ -42,7 +42,7 @@ from hardware.arcos_codec import (
     xy_delta,
 )
 from hardware.transport import SerialTransport, Transport
-from twin.devices import (
+from twin.core.devices import (
     Base,
     ConnectionLostError,
     DeviceError,
@@ -51,7 +51,7 @@ from twin.devices import (
     OutOfRangeError,
     ProtocolError,
 )
-from twin.geometry import Pose2D, wrap_angle
+from twin.core.geometry import Pose2D, wrap_angle
 
 INTER_BYTE_LIMIT = 0.1  # s of silence inside a packet before it counts as truncated (ARIA)
 XY_TOLERANCE = 0.03  # m: closer than this, go_to only turns (as the sim's controller does)

@@ -17,7 +17,7 @@ import struct
 from dataclasses import dataclass, field
 from enum import IntEnum
 
-from twin.devices import ProtocolError
+from twin.core.devices import ProtocolError
 
 HEADER = b"\xfa\xfb"
 ARGINT, ARGNINT, ARGSTR = 0x3B, 0x1B, 0x2B

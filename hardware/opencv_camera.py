@@ -17,8 +17,8 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from twin.devices import Camera, ConnectionLostError, DeviceError, DeviceTimeoutError, Frame
-from twin.geometry import CameraModel
+from twin.core.devices import Camera, ConnectionLostError, DeviceError, DeviceTimeoutError, Frame
+from twin.core.geometry import CameraModel
 
 # How many buffered frames to discard before the one we keep (V4L2 keeps up to 4).
 STALE_FRAMES = 2

@@ -14,7 +14,7 @@ from typing import Protocol
 
 import serial
 
-from twin.devices import ConnectionLostError, DeviceError
+from twin.core.devices import ConnectionLostError, DeviceError
 
 
 class Transport(Protocol):

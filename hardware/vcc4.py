@@ -22,7 +22,7 @@ from collections.abc import Callable
 from hardware import vcc4_codec as codec
 from hardware.transport import SerialTransport, Transport
 from hardware.vcc4_codec import ModeError
-from twin.devices import (
+from twin.core.devices import (
     VCC4_LIMITS,
     ConnectionLostError,
     DeviceBusyError,
@@ -48,7 +48,7 @@ LIMITS = VCC4_LIMITS
 
 
 class VCC4(PanTilt):
-    """The camera head as a ``twin.devices.PanTilt``.
+    """The camera head as a ``twin.core.devices.PanTilt``.
 
     ``VCC4(transport)`` talks over any ``Transport`` (e.g. ``ArcosBase.aux_transport(1)``);
     ``VCC4.open(port)`` opens a serial line (9600 8N1, RTS asserted) on ``connect`` and reopens

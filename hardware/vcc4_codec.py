@@ -13,7 +13,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from twin.devices import (
+from twin.core.devices import (
     DeviceBusyError,
     DeviceError,
     DeviceFaultError,

@@ -27,7 +27,7 @@ from hardware.arcos_codec import (
     vel2_wheels,
     xy_delta,
 )
-from twin.devices import ProtocolError
+from twin.core.devices import ProtocolError
 
 
 def h(text: str) -> bytes:

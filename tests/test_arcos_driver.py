@@ -12,14 +12,14 @@ from pathlib import Path
 import pytest
 
 from hardware.arcos import ArcosBase
-from twin.devices import (
+from twin.core.devices import (
     ConnectionLostError,
     DeviceFaultError,
     DeviceTimeoutError,
     NotConnectedError,
     OutOfRangeError,
 )
-from twin.geometry import Pose2D
+from twin.core.geometry import Pose2D
 from twin.serial_twins.arcos import ArcosServer, KinematicActuator, serve_arcos
 from twin.serial_twins.bytedevice import EchoDevice
 from twin.serial_twins.pty import PtyLink

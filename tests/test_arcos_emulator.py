@@ -19,7 +19,7 @@ from hardware.arcos_codec import (
     parse_sync2,
     vel2_argument,
 )
-from twin.devices import ProtocolError
+from twin.core.devices import ProtocolError
 from twin.serial_twins.arcos import ArcosEmulator, KinematicActuator
 from twin.serial_twins.bytedevice import EchoDevice
 

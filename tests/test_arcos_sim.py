@@ -11,7 +11,7 @@ from collections.abc import Iterator
 import pytest
 
 from hardware.arcos import ArcosBase
-from twin.geometry import Pose2D
+from twin.core.geometry import Pose2D
 from twin.serial_twins.arcos import serve_arcos
 from twin.serial_twins.runner import WorldRunner
 from twin.sim import SimRobot, make_sim_robot

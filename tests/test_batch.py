@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from twin.batch import (
+from twin.app.batch import (
     _WORLDS,
     BatchSpec,
     MissionWorld,
@@ -16,7 +16,7 @@ from twin.batch import (
     run_mission,
 )
 from twin.cli import main
-from twin.errors import InputError
+from twin.core.errors import InputError
 
 SHIPPED = Path(__file__).resolve().parents[1] / "scenes" / "living_room_survey.toml"
 DETERMINISTIC = ("run", "lighting", "threshold", "objects", "views")

@@ -1,11 +1,11 @@
-"""Properties of supersampled wedge coverage (twin.coverage via AccumulatorGrid.coverage)."""
+"""Properties of supersampled wedge coverage (twin.core.coverage via AccumulatorGrid.coverage)."""
 
 import math
 
 import numpy as np
 import pytest
 
-from twin.grid import AccumulatorGrid, GridSpec
+from twin.core.grid import AccumulatorGrid, GridSpec
 
 
 def brute_force_coverage(spec, s, origin, a0, a1, max_range=None):

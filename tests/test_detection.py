@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 
 import twin.sim
-from twin.config import ObjectConfig
-from twin.detection import prepare_detector
+from twin.app.config import ObjectConfig
+from twin.app.detection import prepare_detector
 from twin.rfch import RFCH
 
 COLOURS = {"red_box": (200, 30, 30), "blue_box": (30, 40, 210)}

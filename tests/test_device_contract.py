@@ -1,4 +1,4 @@
-"""One contract, every implementation: what twin.devices promises, checked on each device.
+"""One contract, every implementation: what twin.core.devices promises, checked on each device.
 
 Gymnasium-style: the same tests run against the MuJoCo sim devices, the OpenCV camera on a real
 capture backend (a video file: no camera is attached here), and the serial hardware drivers
@@ -15,8 +15,8 @@ import cv2
 import numpy as np
 import pytest
 
-from twin.devices import Base, Camera, NotConnectedError, OutOfRangeError, PanTilt
-from twin.geometry import Pose2D
+from twin.core.devices import Base, Camera, NotConnectedError, OutOfRangeError, PanTilt
+from twin.core.geometry import Pose2D
 
 DeviceFactory = Callable[[object], contextlib.AbstractContextManager]
 

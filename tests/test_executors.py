@@ -5,10 +5,8 @@ import json
 import numpy as np
 import pytest
 
-from twin.cli import main
-from twin.errors import InputError, TwinError
-from twin.executors import InlineExecutor, ProcessExecutor, make_executor
-from twin.montecarlo import (
+from twin.app.executors import InlineExecutor, ProcessExecutor, make_executor
+from twin.app.montecarlo import (
     Chunk,
     SweepConfig,
     SweepJournal,
@@ -17,6 +15,8 @@ from twin.montecarlo import (
     run_setting,
     run_sweep,
 )
+from twin.cli import main
+from twin.core.errors import InputError, TwinError
 
 SWEEP = SweepConfig(pfp=(0.0, 0.4), pfn=(0.1, 0.5), views=(4, 9), trials=13, seed=5)
 
@@ -97,7 +97,7 @@ def test_a_journal_of_whole_settings_still_resumes(tmp_path):
 
 def test_a_duplicated_chunk_counts_once(tmp_path):
     journal = SweepJournal(None, SWEEP)
-    from twin.montecarlo import run_chunk
+    from twin.app.montecarlo import run_chunk
 
     part = run_chunk(SWEEP, Chunk(0.0, 0.1, 0, 7))
     assert journal.record(part) is None

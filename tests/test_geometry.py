@@ -5,8 +5,8 @@ import math
 import numpy as np
 import pytest
 
-from twin.errors import InputError
-from twin.geometry import CameraModel, Pose2D, wrap_angle
+from twin.core.errors import InputError
+from twin.core.geometry import CameraModel, Pose2D, wrap_angle
 
 
 def test_image_edges_see_half_the_field_of_view():

@@ -5,9 +5,9 @@ import math
 import numpy as np
 import pytest
 
-from twin.errors import FileFormatError, InputError
-from twin.fusion import Accumulate, LogOdds, Normalized, logodds_weights, make_rule
-from twin.grid import AccumulatorGrid, GridSpec, local_maxima
+from twin.core.errors import FileFormatError, InputError
+from twin.core.fusion import Accumulate, LogOdds, Normalized, logodds_weights, make_rule
+from twin.core.grid import AccumulatorGrid, GridSpec, local_maxima
 
 # Origin on the line x = 2: the bearings [-pi/2, pi/2) are exactly the cells right of it.
 ORIGIN = (2.0, 1.93)
@@ -152,7 +152,7 @@ def test_loading_a_corrupt_or_foreign_file_is_a_clear_error(tmp_path):
 
 
 def test_loading_another_format_version_is_a_clear_error(tmp_path):
-    from twin.store import save_arrays
+    from twin.core.store import save_arrays
 
     path = save_arrays(tmp_path / "g.npz", "accumulator-grid", 99, {}, {"evidence": np.zeros(1)})
     with pytest.raises(FileFormatError, match="version 99 is not supported"):

@@ -120,11 +120,11 @@ def test_hardware_configs_name_bad_devices_in_one_line(tmp_path, cache, capsys):
 
 
 def test_a_line_pulled_mid_mission_is_recovered_and_no_view_is_lost(tmp_path, cache):
-    from twin.config import load_config
-    from twin.detection import prepare_detector
-    from twin.factory import BuildContext, build_robot
-    from twin.grid import AccumulatorGrid
-    from twin.survey import SurveyContext, run_survey
+    from twin.app.config import load_config
+    from twin.app.detection import prepare_detector
+    from twin.app.factory import BuildContext, build_robot
+    from twin.app.survey import SurveyContext, run_survey
+    from twin.core.grid import AccumulatorGrid
 
     config = load_config(reduced(TWINS, tmp_path, cache, time_scale=2.0))
     context = BuildContext(config)

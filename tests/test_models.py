@@ -13,7 +13,7 @@ import pytest
 import twin.sim  # noqa: F401  (must come first: it selects headless GL before mujoco loads)
 import mujoco
 # isort: on
-from twin.geometry import CameraModel
+from twin.core.geometry import CameraModel
 from twin.resources import models_dir, scenes_dir
 from twin.sim.world import World
 

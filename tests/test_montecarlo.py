@@ -6,10 +6,8 @@ import math
 import numpy as np
 import pytest
 
-from twin.cli import main
-from twin.errors import InputError
-from twin.executors import InlineExecutor, ProcessExecutor
-from twin.montecarlo import (
+from twin.app.executors import InlineExecutor, ProcessExecutor
+from twin.app.montecarlo import (
     KERNEL_RULES,
     RESULT_COLUMNS,
     SweepConfig,
@@ -20,6 +18,8 @@ from twin.montecarlo import (
     run_sweep,
     trial_rng,
 )
+from twin.cli import main
+from twin.core.errors import InputError
 
 # 400 trials: a 95 % interval of about +-5 points on a rate near 50 %.
 FIRM = SweepConfig(trials=400, views=(10, 25, 150))

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from hardware.opencv_camera import OpenCVCamera
-from twin.devices import ConnectionLostError, DeviceError
+from twin.core.devices import ConnectionLostError, DeviceError
 
 
 def write_video(path, frames=8, size=(640, 480), bgr=(0, 40, 200)):

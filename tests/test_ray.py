@@ -6,10 +6,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from twin.batch import run_batch
-from twin.errors import InputError
-from twin.executors import InlineExecutor, RayExecutor
-from twin.montecarlo import SweepConfig, plan_chunks, run_sweep
+from twin.app.batch import run_batch
+from twin.app.executors import InlineExecutor, RayExecutor
+from twin.app.montecarlo import SweepConfig, plan_chunks, run_sweep
+from twin.core.errors import InputError
 
 pytest.importorskip("ray")
 
@@ -45,7 +45,7 @@ def test_a_task_error_reaches_the_caller_as_itself(ray_executor):
 def test_a_ray_batch_equals_the_local_one(ray_executor, tmp_path):
     config = tiny_config(tmp_path, tmp_path / "cache")
     spec = spec_for(config, 2)
-    from twin.batch import prepare
+    from twin.app.batch import prepare
 
     prepare(spec, lambda _: None)  # train once, as the command does
     local = run_batch(spec, 2, InlineExecutor())

@@ -7,13 +7,13 @@ import math
 import numpy as np
 import pytest
 
-from twin.errors import FileFormatError, InputError
-from twin.geometry import CameraModel, Pose2D
+from twin.core.errors import FileFormatError, InputError
+from twin.core.geometry import CameraModel, Pose2D
+from twin.core.store import save_arrays
 from twin.rfch import RFCH, Detector, PatchGrid, RFCHParams, kernels
 from twin.rfch.reference import intersection, reference_pair_counts
 from twin.rfch.roc import column_truth, roc_curve
 from twin.rfch.synthetic import cloudy_background, paste, striped_object
-from twin.store import save_arrays
 
 SMALL = {"n_clusters": 16}
 

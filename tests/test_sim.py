@@ -15,13 +15,13 @@ import twin.sim  # noqa: F401  (must come first: it selects headless GL before m
 import mujoco
 # isort: on
 from twin.cli import main
-from twin.devices import (
+from twin.core.devices import (
     DeviceFaultError,
     NotConnectedError,
     OutOfRangeError,
 )
-from twin.errors import InputError, TwinError
-from twin.geometry import CameraModel, Pose2D
+from twin.core.errors import InputError, TwinError
+from twin.core.geometry import CameraModel, Pose2D
 from twin.sim.drive import DiffDriveGeometry, Odometry
 from twin.sim.render import FrameRenderer
 from twin.sim.robot import CAMERA_NAME, SimCamera, SimRobot, make_sim_robot

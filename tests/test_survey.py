@@ -7,13 +7,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from twin.app.config import ConfigError, MissionConfig, load_config
+from twin.app.survey import SurveyContext, plan_views, run_survey
 from twin.cli import main
-from twin.config import ConfigError, MissionConfig, load_config
-from twin.devices import VCC4_LIMITS, Base, Camera, Frame, PanTilt, Robot
-from twin.errors import InputError
-from twin.geometry import CameraModel, Pose2D, wrap_angle
-from twin.grid import AccumulatorGrid, GridSpec
-from twin.survey import SurveyContext, plan_views, run_survey
+from twin.core.devices import VCC4_LIMITS, Base, Camera, Frame, PanTilt, Robot
+from twin.core.errors import InputError
+from twin.core.geometry import CameraModel, Pose2D, wrap_angle
+from twin.core.grid import AccumulatorGrid, GridSpec
 
 SHIPPED = Path(__file__).resolve().parents[1] / "scenes" / "living_room_survey.toml"
 REDUCED_STOPS = "[[1.1, 1.2], [2.5, 3.3], [2.7, 4.4]]"  # 3 of the paper's 5 stops: 24 views
@@ -260,11 +260,11 @@ def test_the_recording_holds_the_expected_entities(reduced_run):
 def test_an_interrupted_survey_resumes_from_its_folder(
     tmp_path, model_cache, monkeypatch, reduced_run
 ):
-    import twin.run
+    import twin.app.run
 
     config = write_config(tmp_path, model_cache, rerun="save")
     out = tmp_path / "run"
-    real = twin.run.run_survey
+    real = twin.app.run.run_survey
 
     def interrupted(context, on_view=None, resume=False):
         def hook(view):
@@ -274,11 +274,11 @@ def test_an_interrupted_survey_resumes_from_its_folder(
 
         return real(context, on_view=hook, resume=resume)
 
-    monkeypatch.setattr(twin.run, "run_survey", interrupted)
+    monkeypatch.setattr(twin.app.run, "run_survey", interrupted)
     assert main(["survey", "--config", str(config), "--out", str(out), "--quiet"]) == 130
     assert not (out / "result.json").exists()
     assert AccumulatorGrid.load(out / "checkpoint" / "grid.npz").views("rice_box") == 10
-    monkeypatch.setattr(twin.run, "run_survey", real)
+    monkeypatch.setattr(twin.app.run, "run_survey", real)
     assert main(["survey", "--resume", str(out), "--quiet"]) == 0
     result = read_result(out)
     assert result["views"] == 24
@@ -356,7 +356,7 @@ def test_unknown_keys_and_broken_toml_are_named(tmp_path, model_cache, edit, mat
 
 
 def test_an_unknown_device_type_is_named_with_the_known_ones(tmp_path, model_cache):
-    from twin.factory import build_robot
+    from twin.app.factory import build_robot
 
     path = tmp_path / "bad.toml"
     text = write_config(tmp_path, model_cache).read_text()

@@ -12,7 +12,7 @@ from hypothesis import strategies as st
 
 from hardware import vcc4_codec as codec
 from hardware.vcc4 import VCC4
-from twin.devices import (
+from twin.core.devices import (
     ConnectionLostError,
     DeviceBusyError,
     DeviceFaultError,
@@ -325,7 +325,7 @@ def _driver(chunk: int = 1000, **options: object) -> tuple[VCC4, VCC4Emulator, L
 
 
 def codec_limits():  # a fast head: 900 deg/s, so moves take milliseconds
-    from twin.devices import PanTiltLimits
+    from twin.core.devices import PanTiltLimits
     return PanTiltLimits(-1.8, 1.8, -0.6, 1.6, math.radians(900), math.radians(900))
 
 

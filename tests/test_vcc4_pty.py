@@ -15,7 +15,7 @@ from hardware import vcc4_codec as codec
 from hardware.transport import SerialTransport
 from hardware.vcc4 import VCC4
 from twin.cli import main
-from twin.devices import ConnectionLostError, DeviceTimeoutError, ProtocolError
+from twin.core.devices import ConnectionLostError, DeviceTimeoutError, ProtocolError
 from twin.serial_twins.pty import PtyLink
 from twin.serial_twins.runner import WorldRunner
 from twin.serial_twins.vcc4 import VCC4Server, VCC4Timing, serve_vcc4

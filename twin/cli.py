@@ -12,7 +12,7 @@ import sys
 from collections.abc import Sequence
 
 from twin import __version__
-from twin.errors import TwinError
+from twin.core.errors import TwinError
 
 # Each module defines ``register(subparsers)``; heavy imports happen inside the handlers so
 # that ``twin --help`` stays fast.

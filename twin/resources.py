@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from twin.errors import TwinError
+from twin.core.errors import TwinError
 
 _PACKAGE_DIR = Path(__file__).resolve().parent
 

@@ -55,10 +55,17 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     from tqdm import tqdm
 
-    from twin.batch import JOURNAL_NAME, BatchJournal, BatchSpec, prepare, run_batch, write_summary
-    from twin.config import ConfigError, default_config_path
-    from twin.errors import InputError
-    from twin.executors import make_executor
+    from twin.app.batch import (
+        JOURNAL_NAME,
+        BatchJournal,
+        BatchSpec,
+        prepare,
+        run_batch,
+        write_summary,
+    )
+    from twin.app.config import ConfigError, default_config_path
+    from twin.app.executors import make_executor
+    from twin.core.errors import InputError
 
     started = time.perf_counter()
     if args.runs < 1:

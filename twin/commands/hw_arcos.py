@@ -9,7 +9,7 @@ from __future__ import annotations
 import argparse
 import math
 
-from twin.errors import InputError
+from twin.core.errors import InputError
 
 
 def register(hw_subparsers: argparse._SubParsersAction) -> None:

@@ -37,7 +37,7 @@ def probe_serial(port: str, timeout: float) -> str:
     """What answers on ``port``, in one line."""
     from hardware.arcos import ArcosBase
     from hardware.vcc4 import VCC4
-    from twin.devices import DeviceError
+    from twin.core.devices import DeviceError
 
     try:
         name, kind, sub = ArcosBase.open(port, sync_attempts=3, reply_timeout=timeout).identify()
@@ -54,7 +54,7 @@ def probe_serial(port: str, timeout: float) -> str:
 
 def probe_camera(device: str) -> str:
     from hardware.opencv_camera import OpenCVCamera
-    from twin.devices import DeviceError
+    from twin.core.devices import DeviceError
 
     try:
         with OpenCVCamera(device, reconnect_attempts=0) as camera:

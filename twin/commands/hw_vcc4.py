@@ -13,7 +13,7 @@ import math
 from collections.abc import Iterator
 from typing import Any
 
-from twin.errors import InputError
+from twin.core.errors import InputError
 
 
 def register(hw_subparsers: argparse._SubParsersAction) -> None:

@@ -77,9 +77,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     from tqdm import tqdm
 
-    from twin.errors import InputError
-    from twin.executors import make_executor
-    from twin.montecarlo import (
+    from twin.app.executors import make_executor
+    from twin.app.montecarlo import (
         DEFAULT_CHUNK_TRIALS,
         JOURNAL_NAME,
         SweepConfig,
@@ -88,7 +87,8 @@ def run(args: argparse.Namespace) -> int:
         run_sweep,
         write_results_csv,
     )
-    from twin.plots import figure3
+    from twin.app.plots import figure3
+    from twin.core.errors import InputError
 
     config = SweepConfig(
         pfp=args.pfp, pfn=args.pfn, views=args.views, trials=args.trials, wedges=args.wedges,

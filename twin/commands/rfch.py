@@ -16,7 +16,7 @@ from pathlib import Path
 from typing import Any
 
 from twin.commands._args import comma_list
-from twin.errors import InputError
+from twin.core.errors import InputError
 from twin.rfch.params import VIEW_MODES, RFCHParams
 
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff")
@@ -288,7 +288,7 @@ def _draw_detection(out: Path, image: Any, detector: Any, scores: Any) -> None:
     import matplotlib.pyplot as plt
     import numpy as np
 
-    from twin.store import write_atomic
+    from twin.core.store import write_atomic
 
     boxes = detector.patch_boxes(image.shape)
     spans = detector.column_spans(image.shape[1])
@@ -330,9 +330,9 @@ def _roc(args: argparse.Namespace) -> int:
     import matplotlib.pyplot as plt
     import numpy as np
 
+    from twin.core.store import write_atomic, write_text_atomic
     from twin.rfch import RFCH
     from twin.rfch.roc import column_truth, roc_curve
-    from twin.store import write_atomic, write_text_atomic
 
     if args.max_fp is not None and not 0.0 <= args.max_fp <= 1.0:
         raise InputError(f"--max-fp must be in [0, 1], got {args.max_fp}")

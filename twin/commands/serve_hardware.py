@@ -43,7 +43,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from twin.errors import InputError
+    from twin.core.errors import InputError
     from twin.serial_twins.session import SerialTwins
     from twin.sim import SimRobot, World
 

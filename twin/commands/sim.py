@@ -9,8 +9,8 @@ import argparse
 import math
 import time
 
-from twin.errors import InputError
-from twin.geometry import Pose2D
+from twin.core.errors import InputError
+from twin.core.geometry import Pose2D
 
 
 def parse_pose(text: str, flag: str) -> Pose2D:

@@ -53,7 +53,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from twin.errors import InputError
+    from twin.core.errors import InputError
 
     started = time.perf_counter()
     if args.resume is not None:
@@ -65,7 +65,7 @@ def run(args: argparse.Namespace) -> int:
         out, options = _resume_options(args.resume)
     else:
         out, options = _fresh_options(args)
-    from twin.run import run_mission
+    from twin.app.run import run_mission
 
     run_mission(
         out,
@@ -79,9 +79,9 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _fresh_options(args: argparse.Namespace) -> tuple[Path, dict]:
-    from twin.config import default_config_path, load_config
-    from twin.errors import InputError
-    from twin.store import write_text_atomic
+    from twin.app.config import default_config_path, load_config
+    from twin.core.errors import InputError
+    from twin.core.store import write_text_atomic
 
     source = args.config or default_config_path()
     config = load_config(source)
@@ -114,7 +114,7 @@ def _fresh_options(args: argparse.Namespace) -> tuple[Path, dict]:
 
 
 def _resume_options(folder: Path) -> tuple[Path, dict]:
-    from twin.errors import InputError
+    from twin.core.errors import InputError
 
     try:
         options = json.loads((folder / RUN_OPTIONS).read_text(encoding="utf-8"))

@@ -11,7 +11,7 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from twin.errors import InputError
+from twin.core.errors import InputError
 from twin.rfch.params import RFCHParams
 
 

@@ -15,7 +15,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from twin.errors import InputError
+from twin.core.errors import InputError
 from twin.rfch import kernels
 from twin.rfch.descriptor import check_image, raw_descriptors, sample_bounds
 from twin.rfch.model import RFCH

@@ -12,11 +12,11 @@ from typing import Any
 import cv2
 import numpy as np
 
-from twin.errors import FileFormatError, InputError, TwinError
+from twin.core.errors import FileFormatError, InputError, TwinError
+from twin.core.store import load_arrays, save_arrays
 from twin.rfch import kernels
 from twin.rfch.descriptor import check_image, check_mask, raw_descriptors, sample
 from twin.rfch.params import RFCHParams
-from twin.store import load_arrays, save_arrays
 
 MODEL_KIND = "rfch-model"
 MODEL_VERSION = 1

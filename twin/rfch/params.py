@@ -24,7 +24,7 @@ from typing import Any
 
 import numpy as np
 
-from twin.errors import InputError
+from twin.core.errors import InputError
 
 RESPONSES = ("gradient", "laplacian")
 VIEW_MODES = ("merged", "per_view")

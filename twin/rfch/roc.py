@@ -14,7 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from twin.errors import InputError
+from twin.core.errors import InputError
 from twin.rfch.params import PatchGrid
 
 

@@ -38,7 +38,7 @@ from hardware.arcos_codec import (
     sync2_reply,
     vel2_wheels,
 )
-from twin.devices import ProtocolError
+from twin.core.devices import ProtocolError
 from twin.serial_twins.bytedevice import ByteDevice
 from twin.serial_twins.pty import PtyLink
 

@@ -22,7 +22,7 @@ from dataclasses import dataclass
 from typing import Any, Protocol
 
 from hardware import vcc4_codec as codec
-from twin.devices import VCC4_LIMITS, PanTiltLimits
+from twin.core.devices import VCC4_LIMITS, PanTiltLimits
 from twin.serial_twins.pty import PtyLink
 
 

@@ -5,7 +5,7 @@ backend already; it must happen before anything imports ``mujoco``, hence here, 
 
 Typical use (units: metres, radians)::
 
-    from twin.geometry import Pose2D
+    from twin.core.geometry import Pose2D
     from twin.sim import make_sim_robot
     sim, robot = make_sim_robot("living_room")      # SimRobot (truth, world) + devices.Robot
     with robot:
@@ -20,7 +20,7 @@ import os
 os.environ.setdefault("MUJOCO_GL", "egl")
 
 # Imported after the line above on purpose: each of these imports mujoco.
-from twin.geometry import Footprint
+from twin.core.geometry import Footprint
 from twin.sim.robot import SimRobot, make_sim_robot
 from twin.sim.training import training_views
 from twin.sim.world import World

@@ -9,7 +9,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from twin.geometry import Pose2D, wrap_angle
+from twin.core.geometry import Pose2D, wrap_angle
 
 
 @dataclass(frozen=True)

@@ -12,8 +12,8 @@ import math
 
 import numpy as np
 
-from twin.errors import TwinError
-from twin.geometry import Pose2D
+from twin.core.errors import TwinError
+from twin.core.geometry import Pose2D
 from twin.sim.world import World
 
 LEVEL_TOLERANCE = 0.01  # metres

@@ -15,8 +15,8 @@ import cv2
 import mujoco
 import numpy as np
 
-from twin.errors import TwinError
-from twin.store import write_atomic
+from twin.core.errors import TwinError
+from twin.core.store import write_atomic
 
 _GL_HINT = (
     "install Mesa's EGL (apt-get install libegl1 libgl1-mesa-dri) or set MUJOCO_GL=osmesa "

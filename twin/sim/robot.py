@@ -1,5 +1,5 @@
 """The simulated Peoplebot: wheel and head servos driven through the physics, wheel odometry,
-and the sim implementations of ``twin.devices`` that share one ``World``.
+and the sim implementations of ``twin.core.devices`` that share one ``World``.
 
 Nothing here moves the robot by writing its pose except ``SimRobot.place``, which sets the
 start of a run (like lifting the robot onto its start mark). Driving and panning go through the
@@ -16,7 +16,7 @@ from collections.abc import Callable
 import mujoco
 import numpy as np
 
-from twin.devices import (
+from twin.core.devices import (
     Base,
     Camera,
     DeviceFaultError,
@@ -27,8 +27,8 @@ from twin.devices import (
     PanTiltLimits,
     Robot,
 )
-from twin.errors import InputError
-from twin.geometry import CameraModel, Pose2D
+from twin.core.errors import InputError
+from twin.core.geometry import CameraModel, Pose2D
 from twin.sim.drive import DiffDriveGeometry, DriveLimits, GoToController, Odometry
 from twin.sim.render import FrameRenderer
 from twin.sim.world import DEFAULT_SCENE, World
@@ -276,7 +276,7 @@ class SimRobot:
         self._head_goal = [float(d.act[a]) for a in self._head_actadr]
 
     def devices(self, camera: CameraModel = PAPER_CAMERA, pose_source: str = "odometry") -> Robot:
-        """The sim camera, pan-tilt and base as a ``twin.devices.Robot`` (see ``SimBase`` for
+        """The sim camera, pan-tilt and base as a ``twin.core.devices.Robot`` (see ``SimBase`` for
         ``pose_source``)."""
         return Robot(SimCamera(self, camera), SimPanTilt(self), SimBase(self, pose_source))
 
@@ -419,6 +419,6 @@ def make_sim_robot(scene: str = DEFAULT_SCENE, start: Pose2D | None = None,
                    camera: CameraModel = PAPER_CAMERA,
                    pose_source: str = "odometry") -> tuple[SimRobot, Robot]:
     """Load a scene, put the robot at ``start`` (default: the scene's), return both the
-    ``SimRobot`` (ground truth, world) and its devices as a ``twin.devices.Robot``."""
+    ``SimRobot`` (ground truth, world) and its devices as a ``twin.core.devices.Robot``."""
     sim = SimRobot(World(scene), start)
     return sim, sim.devices(camera, pose_source)

@@ -13,7 +13,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from twin.geometry import Pose2D
+from twin.core.geometry import Pose2D
 from twin.sim.render import write_png
 from twin.sim.robot import ROBOT_CLEARANCE, SimRobot
 from twin.sim.world import DEFAULT_SCENE, World

@@ -14,7 +14,7 @@ from collections.abc import Sequence
 import mujoco
 import numpy as np
 
-from twin.errors import InputError
+from twin.core.errors import InputError
 from twin.sim.render import FrameRenderer
 from twin.sim.world import World
 

@@ -14,8 +14,8 @@ from pathlib import Path
 import mujoco
 import numpy as np
 
-from twin.errors import InputError, TwinError
-from twin.geometry import Footprint, Pose2D
+from twin.core.errors import InputError, TwinError
+from twin.core.geometry import Footprint, Pose2D
 from twin.resources import scenes_dir
 
 DEFAULT_SCENE = "living_room"

@@ -15,13 +15,13 @@ from typing import Any
 
 import numpy as np
 
-from twin.config import SurveyConfig, load_config
-from twin.errors import InputError, TwinError
-from twin.grid import AccumulatorGrid
-from twin.plots import grid_figure
-from twin.record import NullRecorder, Recorder, RerunRecorder, SceneInfo
-from twin.store import json_safe, write_text_atomic
-from twin.survey import CHECKPOINT_GRID, SurveyContext, estimates, plan_views, run_survey
+from twin.app.config import SurveyConfig, load_config
+from twin.app.plots import grid_figure
+from twin.app.record import NullRecorder, Recorder, RerunRecorder, SceneInfo
+from twin.app.survey import CHECKPOINT_GRID, SurveyContext, estimates, plan_views, run_survey
+from twin.core.errors import InputError, TwinError
+from twin.core.grid import AccumulatorGrid
+from twin.core.store import json_safe, write_text_atomic
 
 RESULT_FILE = "result.json"
 RECORDING_FILE = "recording.rrd"
@@ -39,7 +39,7 @@ def run_mission(
 
     ``on_result`` sees the result as soon as it is written, before a ``serve`` recorder keeps
     serving viewers until Ctrl-C."""
-    from twin.factory import BuildContext, build_robot, uses_sim_world
+    from twin.app.factory import BuildContext, build_robot, uses_sim_world
 
     config = load_config(
         out / "config.toml",
@@ -61,7 +61,7 @@ def run_mission(
 
 def _fly(config, robot, context, out, options, resume, started, quiet, on_result) -> dict[str, Any]:
     """The run proper, once the devices (and any serial twins) exist."""
-    from twin.detection import prepare_detector
+    from twin.app.detection import prepare_detector
 
     setup_started = time.perf_counter()
     truth = _truth(config, context)

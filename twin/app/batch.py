@@ -45,9 +45,9 @@ from typing import Any
 
 import numpy as np
 
-from twin.errors import InputError, TwinError
-from twin.executors import Executor
-from twin.store import JsonLinesJournal, json_safe, write_text_atomic
+from twin.app.executors import Executor
+from twin.core.errors import InputError, TwinError
+from twin.core.store import JsonLinesJournal, json_safe, write_text_atomic
 
 VARY = ("target", "lighting", "threshold")
 _FACTOR_KEY = {name: k for k, name in enumerate(VARY)}
@@ -109,8 +109,8 @@ class BatchSpec:
         }
 
     def load(self):
-        """The parsed config (``twin.config.SurveyConfig``), on whichever machine runs this."""
-        from twin.config import ConfigError, parse_config
+        """The parsed config (``twin.app.config.SurveyConfig``), on whichever machine runs this."""
+        from twin.app.config import ConfigError, parse_config
 
         try:
             data = tomllib.loads(self.config_text)
@@ -154,7 +154,7 @@ def draw_mission(spec: BatchSpec, run: int) -> MissionDraw:
 
 
 class ThresholdedDetector:
-    """A detector whose patch scores below ``threshold`` read 0 (``twin.survey.PatchDetector``)."""
+    """A detector whose patch scores below ``threshold`` read 0 (a ``PatchDetector``)."""
 
     def __init__(self, detector, threshold: float) -> None:
         self.detector = detector
@@ -181,8 +181,8 @@ class MissionWorld:
     """One worker's MuJoCo world, connected robot and trained detector, reused between runs."""
 
     def __init__(self, spec: BatchSpec) -> None:
-        from twin.detection import prepare_detector
-        from twin.factory import build_robot
+        from twin.app.detection import prepare_detector
+        from twin.app.factory import build_robot
 
         self.config = config = spec.load()
         self.robot, context = build_robot(config)
@@ -256,9 +256,9 @@ def _world_for(spec: BatchSpec) -> tuple[MissionWorld, bool]:
 
 def run_mission(spec: BatchSpec, run: int) -> dict[str, Any]:
     """One randomized mission (the task a worker runs); returns its JSON-ready result."""
-    from twin.grid import AccumulatorGrid
-    from twin.record import NullRecorder
-    from twin.survey import SurveyContext, estimates, run_survey
+    from twin.app.record import NullRecorder
+    from twin.app.survey import SurveyContext, estimates, run_survey
+    from twin.core.grid import AccumulatorGrid
 
     started = time.perf_counter()
     mission_world, reused = _world_for(spec)
@@ -327,7 +327,7 @@ class BatchJournal:
 def prepare(spec: BatchSpec, say: Callable[[str], None] = print) -> None:
     """Check the config and train (or load) the detector once here, before workers start, so
     local workers find it cached instead of each training it."""
-    from twin.detection import prepare_detector
+    from twin.app.detection import prepare_detector
 
     config = spec.load()
     if not any(o.body is not None for o in config.objects):
@@ -459,7 +459,7 @@ def _pyplot():
 
 
 def _error_histogram(path: Path, rows: list[dict[str, Any]], tolerance: float) -> Path:
-    from twin.plots import save_figure
+    from twin.app.plots import save_figure
 
     plt = _pyplot()
     fig, ax = plt.subplots(figsize=(5.5, 3.5))
@@ -475,7 +475,7 @@ def _error_histogram(path: Path, rows: list[dict[str, Any]], tolerance: float) -
 
 def _success_vs(path: Path, rows: list[dict[str, Any]], key: str) -> Path:
     """Success rate per furniture top, or per bin (about 5) of a numeric factor."""
-    from twin.plots import save_figure
+    from twin.app.plots import save_figure
 
     plt = _pyplot()
     fig, ax = plt.subplots(figsize=(5.5, 3.5))

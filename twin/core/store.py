@@ -18,7 +18,7 @@ from typing import IO, Any
 
 import numpy as np
 
-from twin.errors import FileFormatError, InputError
+from twin.core.errors import FileFormatError, InputError
 
 _HEADER_KEY = "__header__"
 

@@ -28,10 +28,10 @@ from typing import Protocol
 
 import numpy as np
 
-from twin.devices import View
-from twin.errors import TwinError
-from twin.geometry import CameraModel, Footprint
-from twin.grid import AccumulatorGrid
+from twin.core.devices import View
+from twin.core.errors import TwinError
+from twin.core.geometry import CameraModel, Footprint
+from twin.core.grid import AccumulatorGrid
 
 VIEWER_MEMORY_LIMIT = "1GiB"
 JPEG_QUALITY = 85

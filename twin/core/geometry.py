@@ -12,7 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from twin.errors import InputError
+from twin.core.errors import InputError
 
 
 def wrap_angle(angle: float | np.ndarray) -> float | np.ndarray:

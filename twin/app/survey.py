@@ -5,7 +5,7 @@ range allows and turning the base for the rest; every frame's per-patch scores a
 one value per patch column (the maximum over the column's rows), each column becomes a bearing
 wedge from the camera's position, and the wedges are fused into the grid's object layers.
 
-The loop knows the robot only through ``twin.devices`` (sim and hardware alike). After every
+The loop knows the robot only through ``twin.core.devices`` (sim and hardware alike). After every
 view the grid is saved atomically; the grid's own view count is what a resumed run trusts, so
 an interruption at any moment neither loses nor double-counts a view.
 """
@@ -22,13 +22,13 @@ from typing import Any, Protocol
 
 import numpy as np
 
-from twin.config import MissionConfig
-from twin.devices import PanTiltLimits, Robot
-from twin.errors import TwinError
-from twin.geometry import Pose2D, wrap_angle
-from twin.grid import AccumulatorGrid
-from twin.record import NullRecorder, Recorder, ViewRecord
-from twin.store import write_text_atomic
+from twin.app.config import MissionConfig
+from twin.app.record import NullRecorder, Recorder, ViewRecord
+from twin.core.devices import PanTiltLimits, Robot
+from twin.core.errors import TwinError
+from twin.core.geometry import Pose2D, wrap_angle
+from twin.core.grid import AccumulatorGrid
+from twin.core.store import write_text_atomic
 
 CHECKPOINT_GRID = "checkpoint/grid.npz"
 CHECKPOINT_STATE = "checkpoint/state.json"

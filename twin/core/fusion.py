@@ -27,7 +27,7 @@ from typing import Any, ClassVar, Protocol
 
 import numpy as np
 
-from twin.errors import InputError
+from twin.core.errors import InputError
 
 RATE_EPS = 1e-3
 

@@ -32,11 +32,11 @@ from pathlib import Path
 import numpy as np
 from numba import njit
 
-from twin.coverage import add_coverage
-from twin.errors import InputError
-from twin.executors import Executor
-from twin.fusion import RULES, logodds_weights
-from twin.store import JsonLinesJournal, write_text_atomic
+from twin.app.executors import Executor
+from twin.core.coverage import add_coverage
+from twin.core.errors import InputError
+from twin.core.fusion import RULES, logodds_weights
+from twin.core.store import JsonLinesJournal, write_text_atomic
 
 DEFAULT_RATES: tuple[float, ...] = tuple(round(0.1 * i, 1) for i in range(11))
 # Indices of the rules inside the trial kernel's state; the order is fixed.

@@ -6,9 +6,9 @@ through them. Every device is a context manager: ``connect()`` on entry, ``close
 calls on a device that is not connected raise ``NotConnectedError``.
 
 Units at this interface: metres, radians, seconds, radians per second; map frame as in
-``twin.geometry`` (pan positive to the left, tilt positive up). Degrees and wire units belong to
-the drivers. Blocking calls return when the motion has finished (or raise), so the image grabbed
-next is taken from where the robot says it is.
+``twin.core.geometry`` (pan positive to the left, tilt positive up). Degrees and wire units
+belong to the drivers. Blocking calls return when the motion has finished (or raise), so the
+image grabbed next is taken from where the robot says it is.
 
 Errors are ``DeviceError`` (a ``TwinError``): one line naming the device, what was asked, what
 was seen, and what to do.
@@ -23,8 +23,8 @@ from types import TracebackType
 
 import numpy as np
 
-from twin.errors import TwinError
-from twin.geometry import CameraModel, Pose2D, require_finite
+from twin.core.errors import TwinError
+from twin.core.geometry import CameraModel, Pose2D, require_finite
 
 # -- errors -------------------------------------------------------------------------------------
 

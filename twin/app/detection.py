@@ -18,8 +18,8 @@ from typing import Any
 import numpy as np
 
 from twin import __version__
-from twin.config import ObjectConfig
-from twin.errors import InputError
+from twin.app.config import ObjectConfig
+from twin.core.errors import InputError
 from twin.resources import models_dir, scenes_dir
 
 TRAINING_SCENE = "training_stage"

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
-from twin.store import write_atomic
+from twin.core.store import write_atomic
 
 
 def _pyplot():

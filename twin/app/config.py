@@ -17,9 +17,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from twin.errors import InputError
-from twin.fusion import RULES, FusionRule, make_rule
-from twin.grid import GridSpec
+from twin.core.errors import InputError
+from twin.core.fusion import RULES, FusionRule, make_rule
+from twin.core.grid import GridSpec
 from twin.resources import scenes_dir
 
 DEFAULT_CONFIG_NAME = "living_room_survey.toml"

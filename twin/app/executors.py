@@ -20,7 +20,7 @@ from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
 from typing import Any, Protocol, TypeVar
 
-from twin.errors import InputError, TwinError
+from twin.core.errors import InputError, TwinError
 
 T = TypeVar("T")
 _DONE = object()

@@ -2,8 +2,8 @@
 
 Each view fuses one bearing interval ("sensor wedge") per image patch column, projected from the
 robot's known position; every cell gains in proportion to how much of it the column's wedge
-covers (supersampled, ``twin.coverage``), weighted by the rule's per-column weight
-(``twin.fusion``). Over many views the wedges through an object reinforce its cell, while cells
+covers (supersampled, ``twin.core.coverage``), weighted by the rule's per-column weight
+(``twin.core.fusion``). Over many views the wedges through an object reinforce its cell, while cells
 crossed only incidentally stay low; ``peaks`` reads the maxima back in metres.
 
 Layers are indexed [row, col] with row 0 at ``y_min`` (map y up); cell (row, col) spans
@@ -20,11 +20,11 @@ from pathlib import Path
 
 import numpy as np
 
-from twin.coverage import add_coverage
-from twin.errors import FileFormatError, InputError
-from twin.fusion import Accumulate, FusionRule, make_rule
-from twin.geometry import require_finite
-from twin.store import load_arrays, save_arrays
+from twin.core.coverage import add_coverage
+from twin.core.errors import FileFormatError, InputError
+from twin.core.fusion import Accumulate, FusionRule, make_rule
+from twin.core.geometry import require_finite
+from twin.core.store import load_arrays, save_arrays
 
 GRID_FORMAT = "accumulator-grid"
 GRID_FORMAT_VERSION = 1

@@ -17,19 +17,19 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from twin.config import DeviceConfig, SurveyConfig
-from twin.devices import Device, Robot
-from twin.errors import InputError
-from twin.geometry import CameraModel, Pose2D
+from twin.app.config import DeviceConfig, SurveyConfig
+from twin.core.devices import Device, Robot
+from twin.core.errors import InputError
+from twin.core.geometry import CameraModel, Pose2D
 
 # (role, type) -> "module:function"; the function takes (DeviceConfig, BuildContext).
 DEVICE_FACTORIES: dict[tuple[str, str], str] = {
-    ("camera", "sim"): "twin.factory:sim_camera",
-    ("pantilt", "sim"): "twin.factory:sim_pantilt",
-    ("base", "sim"): "twin.factory:sim_base",
-    ("camera", "opencv"): "twin.factory:opencv_camera",
-    ("pantilt", "vcc4"): "twin.factory:vcc4_pantilt",
-    ("base", "arcos"): "twin.factory:arcos_base",
+    ("camera", "sim"): "twin.app.factory:sim_camera",
+    ("pantilt", "sim"): "twin.app.factory:sim_pantilt",
+    ("base", "sim"): "twin.app.factory:sim_base",
+    ("camera", "opencv"): "twin.app.factory:opencv_camera",
+    ("pantilt", "vcc4"): "twin.app.factory:vcc4_pantilt",
+    ("base", "arcos"): "twin.app.factory:arcos_base",
 }
 TWIN_PORT = "twin"
 # Devices are built base first: a VC-C4 on the base's AUX port needs the base's driver.
