@@ -32,8 +32,10 @@ from twin.sim import make_sim_robot
 def _ms(values: list[float]) -> str:
     values = sorted(values)
     p95 = values[min(len(values) - 1, int(0.95 * len(values)))]
-    return (f"median {1000 * statistics.median(values):.1f} ms, p95 {1000 * p95:.1f} ms, "
-            f"max {1000 * values[-1]:.1f} ms (n={len(values)})")
+    return (
+        f"median {1000 * statistics.median(values):.1f} ms, p95 {1000 * p95:.1f} ms, "
+        f"max {1000 * values[-1]:.1f} ms (n={len(values)})"
+    )
 
 
 def main() -> None:
@@ -52,8 +54,10 @@ def main() -> None:
             count, t0 = base.sip_count, time.monotonic()
             time.sleep(args.seconds)
             rate = (base.sip_count - count) / (time.monotonic() - t0)
-            print(f"SIP rate through the pty: {rate:.2f} SIPs/s over {args.seconds:g} s "
-                  f"(firmware cycle 100 ms; {base.protocol_errors} protocol errors)")
+            print(
+                f"SIP rate through the pty: {rate:.2f} SIPs/s over {args.seconds:g} s "
+                f"(firmware cycle 100 ms; {base.protocol_errors} protocol errors)"
+            )
             base.stop()
             time.sleep(0.5)
 

@@ -66,8 +66,11 @@ def full_sweep(trials: int, workers: int, chunk: int) -> None:
           f"cluster start {start_time:.1f} s, not counted)")  # fmt: skip
     assert _identical(local_results, ray_results), "Ray and local results differ"
     rate = sum(int(r.successes[0, 0]) for r in local_results) / n
-    print(f"   identical: all {len(local_results)} settings x rules x view counts "
-          f"(e.g. accumulate at 10 views, mean over settings: {100 * rate:.1f} %)", flush=True)
+    print(
+        f"   identical: all {len(local_results)} settings x rules x view counts "
+        f"(e.g. accumulate at 10 views, mean over settings: {100 * rate:.1f} %)",
+        flush=True,
+    )
 
 
 def speedup(trials: int, chunk: int) -> None:

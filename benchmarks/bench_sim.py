@@ -67,8 +67,9 @@ def bench_accuracy(goals: int, seed: int) -> tuple[float, float, float]:
     done = 0
     while done < goals:  # random goals near the survey stops, whose straight path is clear
         x, y = LIVING_ROOM_STOPS[int(rng.integers(len(LIVING_ROOM_STOPS)))]
-        goal = Pose2D(x + rng.uniform(-0.2, 0.2), y + rng.uniform(-0.2, 0.2),
-                      rng.uniform(-math.pi, math.pi))
+        goal = Pose2D(
+            x + rng.uniform(-0.2, 0.2), y + rng.uniform(-0.2, 0.2), rng.uniform(-math.pi, math.pi)
+        )
         here = robot.truth_pose()
         if robot.world.path_clearance((here.x, here.y), (goal.x, goal.y)) < 0.35:
             continue
@@ -95,8 +96,10 @@ def main() -> None:
     print(f"physics real-time factor, bare mj_step:        {bare:7.1f}x  (goal >= 20)")
     print(f"physics real-time factor, go-to controller:    {controlled:7.1f}x")
     xy, yaw, odo = bench_accuracy(args.goals, args.seed)
-    print(f"drive accuracy over {args.goals} goals: worst {100 * xy:.1f} cm, {yaw:.2f} deg "
-          f"(promise 5 cm, 3 deg); odometry vs truth worst {100 * odo:.1f} cm")
+    print(
+        f"drive accuracy over {args.goals} goals: worst {100 * xy:.1f} cm, {yaw:.2f} deg "
+        f"(promise 5 cm, 3 deg); odometry vs truth worst {100 * odo:.1f} cm"
+    )
 
 
 if __name__ == "__main__":

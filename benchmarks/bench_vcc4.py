@@ -52,12 +52,17 @@ def main() -> None:
 
     sim, _ = make_sim_robot()
     timing = VCC4Timing(latency=args.latency, baud=args.baud, power_seconds=0.2, init_seconds=0.2)
-    with WorldRunner(sim, time_scale=4.0), serve_vcc4(sim, timing=timing) as server, \
-            VCC4.open(server.path) as camera:
+    with (
+        WorldRunner(sim, time_scale=4.0),
+        serve_vcc4(sim, timing=timing) as server,
+        VCC4.open(server.path) as camera,
+    ):
         median, p95 = _time_requests(camera, args.count)
-        print(f"position request round trip through the pty ({args.count} requests, emulated "
-              f"latency {args.latency * 1e3:.0f} ms, {args.baud} baud): "
-              f"median {median * 1e3:.2f} ms, p95 {p95 * 1e3:.2f} ms")
+        print(
+            f"position request round trip through the pty ({args.count} requests, emulated "
+            f"latency {args.latency * 1e3:.0f} ms, {args.baud} baud): "
+            f"median {median * 1e3:.2f} ms, p95 {p95 * 1e3:.2f} ms"
+        )
         moves = []
         for k in range(args.moves):
             target = math.radians(30.0 if k % 2 == 0 else 0.0)
@@ -65,16 +70,23 @@ def main() -> None:
             camera.move_to(target)
             moves.append(time.perf_counter() - start)
         median, p95 = _quantiles(moves)
-        print(f"30-degree move at 90 deg/s, world at 4x ({args.moves} moves): wall median "
-              f"{median * 1e3:.0f} ms, p95 {p95 * 1e3:.0f} ms (ideal 83 ms + settling)")
+        print(
+            f"30-degree move at 90 deg/s, world at 4x ({args.moves} moves): wall median "
+            f"{median * 1e3:.0f} ms, p95 {p95 * 1e3:.0f} ms (ideal 83 ms + settling)"
+        )
     aux1 = VCC4Emulator(SimHeadActuator(sim), timing=timing)
-    with WorldRunner(sim, time_scale=4.0), serve_arcos(sim, aux1=aux1) as server, \
-            ArcosBase.open(server.path) as base, \
-            VCC4(base.aux_transport(1), answer_timeout=1.0) as camera:
+    with (
+        WorldRunner(sim, time_scale=4.0),
+        serve_arcos(sim, aux1=aux1) as server,
+        ArcosBase.open(server.path) as base,
+        VCC4(base.aux_transport(1), answer_timeout=1.0) as camera,
+    ):
         count = max(1, args.count // 3)
         median, p95 = _time_requests(camera, count)
-        print(f"position request round trip through the ARCOS AUX1 tunnel ({count} requests): "
-              f"median {median * 1e3:.2f} ms, p95 {p95 * 1e3:.2f} ms")
+        print(
+            f"position request round trip through the ARCOS AUX1 tunnel ({count} requests): "
+            f"median {median * 1e3:.2f} ms, p95 {p95 * 1e3:.2f} ms"
+        )
 
 
 if __name__ == "__main__":

@@ -76,8 +76,9 @@ class ArcosLimits:
 def _compose(a: Pose2D, b: Pose2D) -> Pose2D:
     """``b`` expressed in ``a``'s frame, taken to ``a``'s parent frame."""
     c, s = math.cos(a.yaw), math.sin(a.yaw)
-    return Pose2D(a.x + c * b.x - s * b.y, a.y + s * b.x + c * b.y,
-                  float(wrap_angle(a.yaw + b.yaw)))
+    return Pose2D(
+        a.x + c * b.x - s * b.y, a.y + s * b.x + c * b.y, float(wrap_angle(a.yaw + b.yaw))
+    )
 
 
 def _relative(a: Pose2D, b: Pose2D) -> Pose2D:
@@ -115,11 +116,21 @@ class ArcosBase(Base):
     """An ARCOS/AROS robot base on any ``Transport`` (made by ``open_transport`` at connect,
     again at a reconnect)."""
 
-    def __init__(self, open_transport: Callable[[], Transport], *, name: str = "ARCOS base",
-                 start: Pose2D = ORIGIN, limits: ArcosLimits = ArcosLimits(),
-                 reply_timeout: float = 1.0, sync_attempts: int = 6, sip_timeout: float = 2.0,
-                 pulse_period: float = 0.5, auto_reconnect: bool = True,
-                 reconnect_timeout: float = 5.0, enable_motors: bool = True) -> None:
+    def __init__(
+        self,
+        open_transport: Callable[[], Transport],
+        *,
+        name: str = "ARCOS base",
+        start: Pose2D = ORIGIN,
+        limits: ArcosLimits = ArcosLimits(),
+        reply_timeout: float = 1.0,
+        sync_attempts: int = 6,
+        sip_timeout: float = 2.0,
+        pulse_period: float = 0.5,
+        auto_reconnect: bool = True,
+        reconnect_timeout: float = 5.0,
+        enable_motors: bool = True,
+    ) -> None:
         self.name = name
         self.enable_motors = enable_motors
         self._open_transport = open_transport
@@ -155,8 +166,7 @@ class ArcosBase(Base):
         """A base on serial port ``port`` (8N1, no flow control); ``options`` as for the
         constructor. Nothing is opened until ``connect()``."""
         name = str(options.pop("name", "ARCOS base"))
-        return cls(lambda: SerialTransport(port, baudrate, name), name=name,
-                   **options)  # type: ignore[arg-type]
+        return cls(lambda: SerialTransport(port, baudrate, name), name=name, **options)  # type: ignore[arg-type]
 
     # -- lifecycle ---------------------------------------------------------------------------
     @property
@@ -196,18 +206,21 @@ class ArcosBase(Base):
                 self._odometry = None
                 first, self._sip_time = self.sip_count, time.monotonic()
             self._stop_io.clear()
-            self._io = threading.Thread(target=self._io_loop, args=(transport,),
-                                        name=f"{self.name} io", daemon=True)
+            self._io = threading.Thread(
+                target=self._io_loop, args=(transport,), name=f"{self.name} io", daemon=True
+            )
             self._io.start()
             self._await_sip(first, time.monotonic() + 2.0 * self.reply_timeout, "open the robot")
             lim = self.limits
-            for cmd, value in ((Command.ENABLE, int(self.enable_motors)),
-                               (Command.SETV, lim.speed * 1000.0),
-                               (Command.SETA, lim.accel * 1000.0),
-                               (Command.SETA, -lim.accel * 1000.0),
-                               (Command.SETRV, math.degrees(lim.turn_rate)),
-                               (Command.SETRA, math.degrees(lim.turn_accel)),
-                               (Command.SETRA, -math.degrees(lim.turn_accel))):
+            for cmd, value in (
+                (Command.ENABLE, int(self.enable_motors)),
+                (Command.SETV, lim.speed * 1000.0),
+                (Command.SETA, lim.accel * 1000.0),
+                (Command.SETA, -lim.accel * 1000.0),
+                (Command.SETRV, math.degrees(lim.turn_rate)),
+                (Command.SETRA, math.degrees(lim.turn_accel)),
+                (Command.SETRA, -math.degrees(lim.turn_accel)),
+            ):
                 self._write(command(cmd, round(value)))
             if self.enable_motors:
                 self._await_motors(time.monotonic() + 2.0 * self.reply_timeout)
@@ -229,9 +242,11 @@ class ArcosBase(Base):
             except DeviceTimeoutError:
                 if self.sip_count > first:  # SIPs come, but the motors stay off
                     raise DeviceFaultError(
-                        self.name, "enable the motors", "the SIPs still show them off",
-                        "release the robot's STOP button and check the motor power "
-                        "switch") from None
+                        self.name,
+                        "enable the motors",
+                        "the SIPs still show them off",
+                        "release the robot's STOP button and check the motor power switch",
+                    ) from None
                 raise
             seq = self.sip_count
             if sip.motors_enabled:
@@ -284,8 +299,9 @@ class ArcosBase(Base):
     def _write(self, packet: bytes) -> None:
         transport = self._transport
         if transport is None:
-            raise ConnectionLostError(self.name, "send a command", "the line is closed",
-                                      "connect first")
+            raise ConnectionLostError(
+                self.name, "send a command", "the line is closed", "connect first"
+            )
         with self._write_lock:
             transport.write(packet)
             self._last_write = time.monotonic()
@@ -295,8 +311,9 @@ class ArcosBase(Base):
         self._require_link(f"send command {cmd}")
         self._write(command(cmd, arg))
 
-    def _read_packet(self, transport: Transport, parser: PacketParser,
-                     timeout: float) -> bytes | None:
+    def _read_packet(
+        self, transport: Transport, parser: PacketParser, timeout: float
+    ) -> bytes | None:
         end = time.monotonic() + timeout
         while True:
             try:
@@ -324,8 +341,11 @@ class ArcosBase(Base):
         while step < 3:
             if attempts >= self.sync_attempts:
                 raise DeviceTimeoutError(
-                    self.name, f"SYNC{step} handshake", f"no proper reply in {attempts} tries "
-                    f"of {self.reply_timeout:g} s", "check power, cable and baud rate (9600)")
+                    self.name,
+                    f"SYNC{step} handshake",
+                    f"no proper reply in {attempts} tries of {self.reply_timeout:g} s",
+                    "check power, cable and baud rate (9600)",
+                )
             attempts += 1
             self._write(command(step))
             reply = self._read_packet(transport, parser, self.reply_timeout)
@@ -360,8 +380,11 @@ class ArcosBase(Base):
             except DeviceError as exc:
                 with self._cond:
                     self._lost = ConnectionLostError(
-                        self.name, "read the robot's packets", exc.seen,
-                        "check the cable; reconnect() opens the line again")
+                        self.name,
+                        "read the robot's packets",
+                        exc.seen,
+                        "check the cable; reconnect() opens the line again",
+                    )
                     self._cond.notify_all()
                 return
             if data:
@@ -414,9 +437,12 @@ class ArcosBase(Base):
             try:
                 self.reconnect()
             except DeviceError as exc:
-                raise ConnectionLostError(self.name, asked, f"the line was lost and reconnecting "
-                                          f"failed ({exc.seen})", "check the cable and the "
-                                          "robot's power") from None
+                raise ConnectionLostError(
+                    self.name,
+                    asked,
+                    f"the line was lost and reconnecting failed ({exc.seen})",
+                    "check the cable and the robot's power",
+                ) from None
 
     def _await_sip(self, after: int, deadline: float, asked: str) -> Sip:
         """The first SIP numbered above ``after``; typed errors on silence or a lost line."""
@@ -430,11 +456,18 @@ class ArcosBase(Base):
                 # the GIL by a long computation gets a full timeout to catch up
                 if now - max(self._sip_time, began) > self.sip_timeout:
                     raise DeviceTimeoutError(
-                        self.name, asked, f"no SIP from the robot for {self.sip_timeout:g} s",
-                        "check the cable, the robot's power and that nothing else holds the line")
+                        self.name,
+                        asked,
+                        f"no SIP from the robot for {self.sip_timeout:g} s",
+                        "check the cable, the robot's power and that nothing else holds the line",
+                    )
                 if now >= deadline:
-                    raise DeviceTimeoutError(self.name, asked, "not finished in time",
-                                             "allow more time or check the path")
+                    raise DeviceTimeoutError(
+                        self.name,
+                        asked,
+                        "not finished in time",
+                        "allow more time or check the path",
+                    )
                 self._cond.wait(min(deadline - now, 0.05))
             return self.last_sip
 
@@ -478,9 +511,12 @@ class ArcosBase(Base):
         if fault is not None:
             with contextlib.suppress(DeviceError):
                 self._write(command(Command.STOP))
-            raise DeviceFaultError(self.name, asked, f"{fault} at odometry "
-                                   f"{_fmt(self._map_pose_now())}",
-                                   "clear the obstacle; choose a stop with a free path")
+            raise DeviceFaultError(
+                self.name,
+                asked,
+                f"{fault} at odometry {_fmt(self._map_pose_now())}",
+                "clear the obstacle; choose a stop with a free path",
+            )
 
     def _settle(self, deadline: float, asked: str) -> Pose2D:
         """Wait until the firmware reports the motion done (a 'stopped' SIP generated after
@@ -519,8 +555,9 @@ class ArcosBase(Base):
                     bearing = math.atan2(goal.y - pose.y, goal.x - pose.x)
                     if abs(wrap_angle(bearing - pose.yaw)) > YAW_TOLERANCE:
                         pose = self._turn_to(bearing, deadline, asked)
-                    along = ((goal.x - pose.x) * math.cos(pose.yaw)
-                             + (goal.y - pose.y) * math.sin(pose.yaw))
+                    along = (goal.x - pose.x) * math.cos(pose.yaw) + (goal.y - pose.y) * math.sin(
+                        pose.yaw
+                    )
                     mm = max(-30000, min(30000, round(along * 1000.0)))
                     self._command_then_settle(command(Command.MOVE, mm), deadline, asked)
                 elif abs(pose.heading_error_to(goal)) > YAW_TOLERANCE:
@@ -537,18 +574,28 @@ class ArcosBase(Base):
                     self._write(command(Command.STOP))
                 raise
         pose = self.pose()
-        raise DeviceTimeoutError(self.name, asked, f"still {100 * pose.distance_to(goal):.1f} cm"
-                                 f" and {abs(math.degrees(pose.heading_error_to(goal))):.1f} deg "
-                                 "away after 12 corrections", "check wheel slip and the path")
+        raise DeviceTimeoutError(
+            self.name,
+            asked,
+            f"still {100 * pose.distance_to(goal):.1f} cm"
+            f" and {abs(math.degrees(pose.heading_error_to(goal))):.1f} deg "
+            "away after 12 corrections",
+            "check wheel slip and the path",
+        )
 
     def drive(self, speed: float, turn_rate: float, duration: float) -> Pose2D:
         asked = f"drive {speed:.3f} m/s, {turn_rate:.3f} rad/s for {duration:g} s"
         lim = self.limits
-        if not (abs(speed) <= lim.speed and abs(turn_rate) <= lim.turn_rate
-                and 0.0 <= duration <= 600.0):
-            raise OutOfRangeError(self.name, asked, f"limits are |speed| <= {lim.speed} m/s, "
-                                  f"|turn rate| <= {lim.turn_rate:.2f} rad/s, 0..600 s",
-                                  "use smaller values")
+        if not (
+            abs(speed) <= lim.speed and abs(turn_rate) <= lim.turn_rate and 0.0 <= duration <= 600.0
+        ):
+            raise OutOfRangeError(
+                self.name,
+                asked,
+                f"limits are |speed| <= {lim.speed} m/s, "
+                f"|turn rate| <= {lim.turn_rate:.2f} rad/s, 0..600 s",
+                "use smaller values",
+            )
         self._require_link(asked)
         start = time.monotonic()
         end = start + duration
@@ -589,8 +636,12 @@ class ArcosAuxTransport:
 
     def _check(self, asked: str) -> None:
         if self._closed:
-            raise ConnectionLostError(self.name, asked, "the AUX transport is closed",
-                                      "take a new one from ArcosBase.aux_transport()")
+            raise ConnectionLostError(
+                self.name,
+                asked,
+                "the AUX transport is closed",
+                "take a new one from ArcosBase.aux_transport()",
+            )
         self.base._require_link(asked)
 
     def _recovering(self, operation: Callable[[], T]) -> T:
@@ -603,7 +654,8 @@ class ArcosAuxTransport:
             if self._closed or not self.base.auto_reconnect:
                 raise
             self.base._lost = self.base._lost or ConnectionLostError(
-                self.name, "use the AUX port", "the line went away", "reconnecting")
+                self.name, "use the AUX port", "the line went away", "reconnecting"
+            )
             self.base._require_link("reconnect for the AUX port")
             return operation()
 
@@ -612,7 +664,7 @@ class ArcosAuxTransport:
 
         def send() -> None:
             for i in range(0, len(data), MAX_STRING):
-                self.base._write(command(self._tty, bytes(data[i:i + MAX_STRING])))
+                self.base._write(command(self._tty, bytes(data[i : i + MAX_STRING])))
 
         self._recovering(send)
 

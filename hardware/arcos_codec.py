@@ -115,8 +115,10 @@ def vel2_wheels(arg: int) -> tuple[int, int]:
     """Inverse of ``vel2_argument``: (left, right) wheel speeds in mm/s."""
     value = arg & 0xFFFF
     left, right = value >> 8, value & 0xFF
-    return ((left - 256 if left > 127 else left) * VEL2_DIVISOR,
-            (right - 256 if right > 127 else right) * VEL2_DIVISOR)
+    return (
+        (left - 256 if left > 127 else left) * VEL2_DIVISOR,
+        (right - 256 if right > 127 else right) * VEL2_DIVISOR,
+    )
 
 
 @dataclass(frozen=True)
@@ -137,17 +139,29 @@ def parse_command(data: bytes, device: str = "ARCOS robot") -> ClientCommand:
         if len(rest) == 1:  # p2os sends SETO as '07 3B' with no value
             return ClientCommand(number, None)
         if len(rest) < 3:
-            raise ProtocolError(device, f"decode command {number}", f"int argument of "
-                                f"{len(rest) - 1} bytes", "send 3B/1B and two bytes")
+            raise ProtocolError(
+                device,
+                f"decode command {number}",
+                f"int argument of {len(rest) - 1} bytes",
+                "send 3B/1B and two bytes",
+            )
         value = int.from_bytes(rest[1:3], "little")
         return ClientCommand(number, -value if kind == ARGNINT else value)
     if kind == ARGSTR:
         if len(rest) < 2 or len(rest) - 2 < rest[1]:
-            raise ProtocolError(device, f"decode command {number}", "string argument shorter "
-                                "than its length byte", "send 2B, length, then the bytes")
-        return ClientCommand(number, bytes(rest[2:2 + rest[1]]))
-    raise ProtocolError(device, f"decode command {number}", f"argument type 0x{kind:02X}",
-                        "use 3B (int), 1B (negative int) or 2B (string)")
+            raise ProtocolError(
+                device,
+                f"decode command {number}",
+                "string argument shorter than its length byte",
+                "send 2B, length, then the bytes",
+            )
+        return ClientCommand(number, bytes(rest[2 : 2 + rest[1]]))
+    raise ProtocolError(
+        device,
+        f"decode command {number}",
+        f"argument type 0x{kind:02X}",
+        "use 3B (int), 1B (negative int) or 2B (string)",
+    )
 
 
 # -- server information packets ------------------------------------------------------------------
@@ -231,8 +245,9 @@ class Sip:
         """A short description of a stall or bumper hit, or None."""
         parts = []
         if self.left_stall or self.right_stall:
-            side = " and ".join(s for s, on in (("left", self.left_stall),
-                                                ("right", self.right_stall)) if on)
+            side = " and ".join(
+                s for s, on in (("left", self.left_stall), ("right", self.right_stall)) if on
+            )
             parts.append(f"{side} wheel stalled")
         if self.front_bumpers:
             parts.append(f"front bumpers 0b{self.front_bumpers:07b}")
@@ -243,17 +258,36 @@ class Sip:
 
 def encode_sip(sip: Sip) -> bytes:
     """The full packet for ``sip`` (x/y sent as their low 15 bits, THPOS as given)."""
-    data = struct.pack("<BHHhhhBHhHBB", SIP_MOVING if sip.moving else SIP_STOPPED,
-                       sip.x & XY_BITS, sip.y & XY_BITS, sip.th, sip.left_vel, sip.right_vel,
-                       sip.battery_dv, sip.stall_bumpers, sip.control, sip.flags, sip.compass,
-                       len(sip.sonar))
+    data = struct.pack(
+        "<BHHhhhBHhHBB",
+        SIP_MOVING if sip.moving else SIP_STOPPED,
+        sip.x & XY_BITS,
+        sip.y & XY_BITS,
+        sip.th,
+        sip.left_vel,
+        sip.right_vel,
+        sip.battery_dv,
+        sip.stall_bumpers,
+        sip.control,
+        sip.flags,
+        sip.compass,
+        len(sip.sonar),
+    )
     for disc, rng in sip.sonar:
         data += struct.pack("<BH", disc, rng)
     data += bytes([sip.grip, sip.anport, sip.analog, sip.digin, sip.digout])
     ext = sip.extension
     if ext is not None:
-        data += struct.pack("<HBhHhbB", ext.battery_dv, ext.charge_state, ext.rot_vel,
-                            ext.fault_flags, ext.lat_vel, ext.temperature, ext.state_of_charge)
+        data += struct.pack(
+            "<HBhHhbB",
+            ext.battery_dv,
+            ext.charge_state,
+            ext.rot_vel,
+            ext.fault_flags,
+            ext.lat_vel,
+            ext.temperature,
+            ext.state_of_charge,
+        )
     return frame(data)
 
 
@@ -270,24 +304,51 @@ def parse_sip(data: bytes, device: str = "ARCOS base") -> Sip:
     """Decode a SIP's data (type byte first, checksum removed); extra bytes beyond the ARCOS
     tail are ignored, as newer firmware appends fields."""
     if len(data) < _SIP_HEAD.size:
-        raise ProtocolError(device, "decode a SIP", f"{len(data)} data bytes, fewer than "
-                            f"{_SIP_HEAD.size}", "check the robot runs ARCOS/AROS firmware")
-    (kind, x, y, th, lv, rv, batt, stall, control, flags, compass,
-     count) = _SIP_HEAD.unpack_from(data)
+        raise ProtocolError(
+            device,
+            "decode a SIP",
+            f"{len(data)} data bytes, fewer than {_SIP_HEAD.size}",
+            "check the robot runs ARCOS/AROS firmware",
+        )
+    (kind, x, y, th, lv, rv, batt, stall, control, flags, compass, count) = _SIP_HEAD.unpack_from(
+        data
+    )
     pos = _SIP_HEAD.size
     need = pos + 3 * count + 5
     if len(data) < need:
-        raise ProtocolError(device, "decode a SIP", f"{len(data)} data bytes for {count} sonar "
-                            f"readings, need {need}", "check the serial line for lost bytes")
+        raise ProtocolError(
+            device,
+            "decode a SIP",
+            f"{len(data)} data bytes for {count} sonar readings, need {need}",
+            "check the serial line for lost bytes",
+        )
     sonar = tuple(struct.unpack_from("<BH", data, pos + 3 * i) for i in range(count))
     pos += 3 * count
-    grip, anport, analog, digin, digout = data[pos:pos + 5]
+    grip, anport, analog, digin, digout = data[pos : pos + 5]
     pos += 5
     ext = None
     if len(data) >= pos + _SIP_EXT.size:
         ext = SipExtension(*_SIP_EXT.unpack_from(data, pos))
-    return Sip(kind == SIP_MOVING, x, y, th, lv, rv, batt, stall, control, flags, compass,
-               sonar, grip, anport, analog, digin, digout, ext)
+    return Sip(
+        kind == SIP_MOVING,
+        x,
+        y,
+        th,
+        lv,
+        rv,
+        batt,
+        stall,
+        control,
+        flags,
+        compass,
+        sonar,
+        grip,
+        anport,
+        analog,
+        digin,
+        digout,
+        ext,
+    )
 
 
 def xy_delta(old: int, new: int) -> int:
@@ -302,12 +363,20 @@ def xy_delta(old: int, new: int) -> int:
 def parse_sync2(data: bytes, device: str = "ARCOS base") -> tuple[str, str, str]:
     """SYNC2's reply: type 2 then three NUL-terminated strings (name, class, subclass)."""
     if not data or data[0] != 2:
-        raise ProtocolError(device, "read the SYNC2 reply", f"packet type {data[:1].hex()}",
-                            "restart the handshake at SYNC0")
+        raise ProtocolError(
+            device,
+            "read the SYNC2 reply",
+            f"packet type {data[:1].hex()}",
+            "restart the handshake at SYNC0",
+        )
     parts = bytes(data[1:]).split(b"\x00")
     if len(parts) < 4:
-        raise ProtocolError(device, "read the SYNC2 reply", f"{len(parts) - 1} strings, not 3",
-                            "check the robot runs ARCOS/AROS firmware")
+        raise ProtocolError(
+            device,
+            "read the SYNC2 reply",
+            f"{len(parts) - 1} strings, not 3",
+            "check the robot runs ARCOS/AROS firmware",
+        )
     name, kind, subclass = (p.decode("latin-1") for p in parts[:3])
     return name, kind, subclass
 
@@ -348,7 +417,7 @@ class PacketParser:
         start = buf.find(HEADER)
         if start < 0:
             # keep a trailing FA: it may be the first half of a header
-            del buf[:len(buf) - 1 if buf[-1:] == HEADER[:1] else len(buf)]
+            del buf[: len(buf) - 1 if buf[-1:] == HEADER[:1] else len(buf)]
             return None
         del buf[:start]
         if len(buf) < 3:
@@ -356,18 +425,26 @@ class PacketParser:
         count = buf[2]
         if count < 3 or count > self.max_count:
             del buf[:2]
-            raise ProtocolError(self.device, "read a packet", f"byte count {count} (allowed "
-                                f"3..{self.max_count})", "check the baud rate and the cable")
+            raise ProtocolError(
+                self.device,
+                "read a packet",
+                f"byte count {count} (allowed 3..{self.max_count})",
+                "check the baud rate and the cable",
+            )
         if len(buf) < 3 + count:
             return None
-        data = bytes(buf[3:1 + count])
-        got = int.from_bytes(buf[1 + count:3 + count], "big")
+        data = bytes(buf[3 : 1 + count])
+        got = int.from_bytes(buf[1 + count : 3 + count], "big")
         if got != checksum(data):
             del buf[:2]
-            raise ProtocolError(self.device, "read a packet", f"bad checksum 0x{got:04X} for a "
-                                f"type 0x{data[0]:02X} packet (expected 0x{checksum(data):04X})",
-                                "check the baud rate and the cable; the packet was dropped")
-        del buf[:3 + count]
+            raise ProtocolError(
+                self.device,
+                "read a packet",
+                f"bad checksum 0x{got:04X} for a "
+                f"type 0x{data[0]:02X} packet (expected 0x{checksum(data):04X})",
+                "check the baud rate and the cable; the packet was dropped",
+            )
+        del buf[: 3 + count]
         return data
 
     def expire_partial(self) -> None:
@@ -378,6 +455,10 @@ class PacketParser:
             self._buf.clear()
             return
         seen = len(self._buf) - start
-        del self._buf[:start + 2]
-        raise ProtocolError(self.device, "read a packet", f"truncated packet ({seen} bytes, then "
-                            "silence)", "check the cable; the packet was dropped")
+        del self._buf[: start + 2]
+        raise ProtocolError(
+            self.device,
+            "read a packet",
+            f"truncated packet ({seen} bytes, then silence)",
+            "check the cable; the packet was dropped",
+        )

@@ -106,7 +106,6 @@ class SerialTransport:
         self._serial.close()
 
 
-
 def _open_error(name: str, port: str, exc: serial.SerialException) -> DeviceError:
     number = getattr(exc, "errno", None)
     text = str(exc)

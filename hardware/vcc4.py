@@ -64,11 +64,20 @@ class VCC4(PanTilt):
 
     name = NAME
 
-    def __init__(self, transport: Transport | None = None, *,
-                 opener: Callable[[], Transport] | None = None, name: str = NAME,
-                 answer_timeout: float = 0.4, retries: int = 1, busy_timeout: float = 2.0,
-                 power_timeout: float = 6.0, init_timeout: float = 15.0,
-                 poll_interval: float = 0.03, tolerance: float = math.radians(0.25)) -> None:
+    def __init__(
+        self,
+        transport: Transport | None = None,
+        *,
+        opener: Callable[[], Transport] | None = None,
+        name: str = NAME,
+        answer_timeout: float = 0.4,
+        retries: int = 1,
+        busy_timeout: float = 2.0,
+        power_timeout: float = 6.0,
+        init_timeout: float = 15.0,
+        poll_interval: float = 0.03,
+        tolerance: float = math.radians(0.25),
+    ) -> None:
         if transport is None and opener is None:
             raise ValueError("give a transport or an opener")
         self.name = name
@@ -164,23 +173,27 @@ class VCC4(PanTilt):
             self._exchange(codec.power(True), "switch the camera on")
         if pedestal or (pedestal is None and status & codec.STATUS_NOT_INITIALISED):
             # after camera-on the camera answers busy for seconds (A7)
-            self._exchange(codec.pedestal_init(), "initialise the pedestal",
-                           busy_timeout=self.power_timeout)
+            self._exchange(
+                codec.pedestal_init(), "initialise the pedestal", busy_timeout=self.power_timeout
+            )
         self._speeds = None
-        self._set_speeds(codec.PAN_SPEED_MAX, codec.TILT_SPEED_MAX,
-                         busy_timeout=self.init_timeout)
+        self._set_speeds(codec.PAN_SPEED_MAX, codec.TILT_SPEED_MAX, busy_timeout=self.init_timeout)
         self._exchange(codec.tilt_range(*INIT_TILT_RANGE), "set the tilt range -30..+90 deg")
 
     def _status(self) -> int:
         """The extended operation status (20 bits, A5)."""
-        answer = self._exchange(codec.operation_status(extended=True),
-                                "read the operation status", expected=5,
-                                busy_timeout=self.init_timeout)
+        answer = self._exchange(
+            codec.operation_status(extended=True),
+            "read the operation status",
+            expected=5,
+            busy_timeout=self.init_timeout,
+        )
         return self._number(answer, 5, "read the operation status")
 
     # -- motion ---------------------------------------------------------------------------------
-    def move_to(self, pan: float, tilt: float = 0.0, *, speed: float | None = None,
-                timeout: float = 10.0) -> tuple[float, float]:
+    def move_to(
+        self, pan: float, tilt: float = 0.0, *, speed: float | None = None, timeout: float = 10.0
+    ) -> tuple[float, float]:
         asked = f"move to pan {math.degrees(pan):.1f} deg, tilt {math.degrees(tilt):.1f} deg"
         self.require_connected(asked)
         LIMITS.check(self.name, pan, tilt, speed)
@@ -189,19 +202,23 @@ class VCC4(PanTilt):
         if speed is not None:
             pps = codec.degrees_to_count(math.degrees(speed))
             if pps < codec.PAN_SPEED_MIN:
-                raise OutOfRangeError(self.name, f"{asked} at {math.degrees(speed):.2f} deg/s",
-                                      "slower than the camera's slowest 0.9 deg/s",
-                                      "use at least 0.9 deg/s")
+                raise OutOfRangeError(
+                    self.name,
+                    f"{asked} at {math.degrees(speed):.2f} deg/s",
+                    "slower than the camera's slowest 0.9 deg/s",
+                    "use at least 0.9 deg/s",
+                )
             pan_pps, tilt_pps = min(pps, pan_pps), min(pps, tilt_pps)
         self._set_speeds(pan_pps, tilt_pps)
         # API pan is positive left, the wire's positive right
-        target = (codec.degrees_to_count(-math.degrees(pan)),
-                  codec.degrees_to_count(math.degrees(tilt)))
+        target = (
+            codec.degrees_to_count(-math.degrees(pan)),
+            codec.degrees_to_count(math.degrees(tilt)),
+        )
         self._move_command(target, (pan_pps, tilt_pps), asked)
         return self._wait_until_there(target, asked, deadline, timeout)
 
-    def _move_command(self, target: tuple[int, int], speeds: tuple[int, int],
-                      asked: str) -> None:
+    def _move_command(self, target: tuple[int, int], speeds: tuple[int, int], asked: str) -> None:
         try:
             self._exchange(codec.pan_tilt(*target), asked, busy_timeout=0.0)
         except DeviceBusyError:
@@ -214,29 +231,40 @@ class VCC4(PanTilt):
             self._set_speeds(*speeds)
             self._exchange(codec.pan_tilt(*target), asked)
 
-    def _wait_until_there(self, target: tuple[int, int], asked: str, deadline: float,
-                          timeout: float) -> tuple[float, float]:
+    def _wait_until_there(
+        self, target: tuple[int, int], asked: str, deadline: float, timeout: float
+    ) -> tuple[float, float]:
         """Poll the operation status until pan and tilt have stopped, then check the position."""
         tolerance = self.tolerance
         while True:
-            status = self._number(self._exchange(codec.operation_status(), asked, expected=3),
-                                  3, asked)
+            status = self._number(
+                self._exchange(codec.operation_status(), asked, expected=3), 3, asked
+            )
             if not status & (codec.STATUS_PANNING | codec.STATUS_TILTING):
                 pan, tilt = self._position(asked)
-                want = (-math.radians(codec.count_to_degrees(target[0])),
-                        math.radians(codec.count_to_degrees(target[1])))
+                want = (
+                    -math.radians(codec.count_to_degrees(target[0])),
+                    math.radians(codec.count_to_degrees(target[1])),
+                )
                 if abs(pan - want[0]) <= tolerance and abs(tilt - want[1]) <= tolerance:
                     return pan, tilt
                 if time.monotonic() > deadline:
                     raise DeviceFaultError(
-                        self.name, asked, f"the head stopped at pan {math.degrees(pan):.2f} deg, "
-                        f"tilt {math.degrees(tilt):.2f} deg", "check nothing blocks the head")
+                        self.name,
+                        asked,
+                        f"the head stopped at pan {math.degrees(pan):.2f} deg, "
+                        f"tilt {math.degrees(tilt):.2f} deg",
+                        "check nothing blocks the head",
+                    )
             if time.monotonic() > deadline:
                 pan, tilt = self._position(asked)
                 raise DeviceTimeoutError(
-                    self.name, asked, f"still moving after {timeout:g} s (at pan "
+                    self.name,
+                    asked,
+                    f"still moving after {timeout:g} s (at pan "
                     f"{math.degrees(pan):.1f} deg, tilt {math.degrees(tilt):.1f} deg)",
-                    "allow more time or a higher speed")
+                    "allow more time or a higher speed",
+                )
             time.sleep(self.poll_interval)
 
     def position(self) -> tuple[float, float]:
@@ -249,8 +277,10 @@ class VCC4(PanTilt):
             pan, tilt = codec.decode_pan_tilt(answer.status)
         except ValueError:
             raise self._bad_status(asked, answer.status, "8 hex digits") from None
-        return (-math.radians(codec.count_to_degrees(pan)),
-                math.radians(codec.count_to_degrees(tilt)))
+        return (
+            -math.radians(codec.count_to_degrees(pan)),
+            math.radians(codec.count_to_degrees(tilt)),
+        )
 
     def stop(self) -> None:
         self.require_connected("stop")
@@ -260,21 +290,31 @@ class VCC4(PanTilt):
         """Top pan and tilt speeds (rad/s) for the next moves, within 0.9..90 / 0.9..70 deg/s."""
         self.require_connected("set speeds")
         pps = [codec.degrees_to_count(math.degrees(s)) for s in (pan_speed, tilt_speed)]
-        if not (codec.PAN_SPEED_MIN <= pps[0] <= codec.PAN_SPEED_MAX
-                and codec.TILT_SPEED_MIN <= pps[1] <= codec.TILT_SPEED_MAX):
-            raise OutOfRangeError(self.name, f"set speeds {math.degrees(pan_speed):.2f}, "
-                                  f"{math.degrees(tilt_speed):.2f} deg/s",
-                                  "outside 0.9..90 deg/s (pan) or 0.9..70 deg/s (tilt)",
-                                  "choose speeds within the camera's range")
+        if not (
+            codec.PAN_SPEED_MIN <= pps[0] <= codec.PAN_SPEED_MAX
+            and codec.TILT_SPEED_MIN <= pps[1] <= codec.TILT_SPEED_MAX
+        ):
+            raise OutOfRangeError(
+                self.name,
+                f"set speeds {math.degrees(pan_speed):.2f}, {math.degrees(tilt_speed):.2f} deg/s",
+                "outside 0.9..90 deg/s (pan) or 0.9..70 deg/s (tilt)",
+                "choose speeds within the camera's range",
+            )
         self._set_speeds(pps[0], pps[1])
 
     def _set_speeds(self, pan_pps: int, tilt_pps: int, busy_timeout: float | None = None) -> None:
         if self._speeds == (pan_pps, tilt_pps):
             return  # each command costs a round trip; the camera keeps what it was told
-        self._exchange(codec.pan_speed(pan_pps), f"set the pan speed to {pan_pps} counts/s",
-                       busy_timeout=busy_timeout)
-        self._exchange(codec.tilt_speed(tilt_pps), f"set the tilt speed to {tilt_pps} counts/s",
-                       busy_timeout=busy_timeout)
+        self._exchange(
+            codec.pan_speed(pan_pps),
+            f"set the pan speed to {pan_pps} counts/s",
+            busy_timeout=busy_timeout,
+        )
+        self._exchange(
+            codec.tilt_speed(tilt_pps),
+            f"set the tilt speed to {tilt_pps} counts/s",
+            busy_timeout=busy_timeout,
+        )
         self._speeds = (pan_pps, tilt_pps)
 
     # -- zoom -----------------------------------------------------------------------------------
@@ -284,14 +324,16 @@ class VCC4(PanTilt):
         self.require_connected(asked)
         top = self.max_zoom()
         if not 0 <= position <= top:
-            raise OutOfRangeError(self.name, asked, f"outside 0..{top}",
-                                  "choose a zoom within the camera's range")
+            raise OutOfRangeError(
+                self.name, asked, f"outside 0..{top}", "choose a zoom within the camera's range"
+            )
         self._exchange(codec.zoom(position), asked)
         deadline = time.monotonic() + timeout
         while (now := self._zoom(asked)) != position:
             if time.monotonic() > deadline:
-                raise DeviceTimeoutError(self.name, asked, f"at {now} after {timeout:g} s",
-                                         "allow more time")
+                raise DeviceTimeoutError(
+                    self.name, asked, f"at {now} after {timeout:g} s", "allow more time"
+                )
             time.sleep(self.poll_interval)
         return now
 
@@ -311,8 +353,15 @@ class VCC4(PanTilt):
         return self._number(self._exchange(codec.zoom_request(), asked, expected=4), 4, asked)
 
     # -- one command, one answer ----------------------------------------------------------------
-    def _exchange(self, frame: bytes, asked: str, *, expected: int = 0,
-                  busy_timeout: float | None = None, retries: int | None = None) -> codec.Answer:
+    def _exchange(
+        self,
+        frame: bytes,
+        asked: str,
+        *,
+        expected: int = 0,
+        busy_timeout: float | None = None,
+        retries: int | None = None,
+    ) -> codec.Answer:
         """Send ``frame`` and return its successful answer carrying ``expected`` status bytes.
 
         Busy answers are resent for up to ``busy_timeout`` seconds; a lost, truncated or
@@ -321,10 +370,17 @@ class VCC4(PanTilt):
         with self._lock:
             return self._exchange_locked(frame, asked, expected, busy_timeout, retries)
 
-    def _exchange_locked(self, frame: bytes, asked: str, expected: int,
-                         busy_timeout: float | None, retries: int | None) -> codec.Answer:
-        busy_until = time.monotonic() + (self.busy_timeout if busy_timeout is None
-                                         else busy_timeout)
+    def _exchange_locked(
+        self,
+        frame: bytes,
+        asked: str,
+        expected: int,
+        busy_timeout: float | None,
+        retries: int | None,
+    ) -> codec.Answer:
+        busy_until = time.monotonic() + (
+            self.busy_timeout if busy_timeout is None else busy_timeout
+        )
         attempts = self.retries if retries is None else retries
         reopened = False
         while True:
@@ -360,8 +416,12 @@ class VCC4(PanTilt):
         except _TermiosError as exc:
             # pyserial lets tcflush's termios.error through when the line went away (a pty
             # whose other end closed): that is a lost connection, not a crash
-            raise ConnectionLostError(self.name, asked, f"the line went away ({exc})",
-                                      "check that the camera is plugged in") from None
+            raise ConnectionLostError(
+                self.name,
+                asked,
+                f"the line went away ({exc})",
+                "check that the camera is plugged in",
+            ) from None
         self._parser.clear()
         transport.write(frame)
         deadline = time.monotonic() + self.answer_timeout
@@ -370,19 +430,31 @@ class VCC4(PanTilt):
             answer = self._parser.next_answer()
             if answer is not None:
                 if answer.device != 0:
-                    raise ProtocolError(self.name, asked, f"an answer from device "
-                                        f"{answer.device}, not 0", "check the cascade setting")
+                    raise ProtocolError(
+                        self.name,
+                        asked,
+                        f"an answer from device {answer.device}, not 0",
+                        "check the cascade setting",
+                    )
                 return answer
             left = deadline - time.monotonic()
             if left <= 0:
                 partial = self._parser.partial
                 if partial:
-                    raise ProtocolError(self.name, asked, f"truncated answer "
-                                        f"{codec.describe(partial)} (no end mark within "
-                                        f"{self.answer_timeout:g} s)", "check the cable")
-                raise DeviceTimeoutError(self.name, asked, f"no answer within "
-                                         f"{self.answer_timeout:g} s", "check the camera is "
-                                         "powered, the cable is null-modem and RTS is wired")
+                    raise ProtocolError(
+                        self.name,
+                        asked,
+                        f"truncated answer "
+                        f"{codec.describe(partial)} (no end mark within "
+                        f"{self.answer_timeout:g} s)",
+                        "check the cable",
+                    )
+                raise DeviceTimeoutError(
+                    self.name,
+                    asked,
+                    f"no answer within {self.answer_timeout:g} s",
+                    "check the camera is powered, the cable is null-modem and RTS is wired",
+                )
             self._parser.feed(transport.read(self._parser.wanted(want), left))
 
     def _reopen(self, asked: str) -> None:
@@ -393,8 +465,9 @@ class VCC4(PanTilt):
         try:
             self._transport = self._opener()
         except DeviceError as exc:
-            raise ConnectionLostError(self.name, asked, f"the port vanished and reopening "
-                                      f"failed ({exc.seen})", exc.remedy) from None
+            raise ConnectionLostError(
+                self.name, asked, f"the port vanished and reopening failed ({exc.seen})", exc.remedy
+            ) from None
 
     def _number(self, answer: codec.Answer, digits: int, asked: str) -> int:
         try:
@@ -405,5 +478,9 @@ class VCC4(PanTilt):
             raise self._bad_status(asked, answer.status, f"{digits} hex digits") from None
 
     def _bad_status(self, asked: str, status: bytes, wanted: str) -> ProtocolError:
-        return ProtocolError(self.name, asked, f"answer status {status!r}, not {wanted}",
-                             "check the camera model (VC-C4) and the cable")
+        return ProtocolError(
+            self.name,
+            asked,
+            f"answer status {status!r}, not {wanted}",
+            "check the camera model (VC-C4) and the cable",
+        )

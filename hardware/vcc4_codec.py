@@ -149,8 +149,9 @@ def parse_command(frame: bytes) -> Command | None:
 
 def answer_frame(flags: int = 0, status: bytes = b"", device: int = 0) -> bytes:
     """``FE D1 D2 E1 E2 [status] EF``: the error-flag byte as two hex digits, then status."""
-    return bytes([ANSWER_HEADER]) + device_bytes(device) + hex_digits(flags, 2) + status + bytes(
-        [END])
+    return (
+        bytes([ANSWER_HEADER]) + device_bytes(device) + hex_digits(flags, 2) + status + bytes([END])
+    )
 
 
 @dataclass(frozen=True)
@@ -245,22 +246,39 @@ def error_for(flags: int, device: str, asked: str) -> DeviceError | None:
         return None
     code = hex_digits(flags, 2).decode()
     if flags & FLAG_MODE:
-        return ModeError(device, asked, f"mode error (answer code {code}): not in host control "
-                         "mode, camera off or pedestal not initialised",
-                         "initialise the camera (twin hw vcc4 init, or reconnect)")
+        return ModeError(
+            device,
+            asked,
+            f"mode error (answer code {code}): not in host control "
+            "mode, camera off or pedestal not initialised",
+            "initialise the camera (twin hw vcc4 init, or reconnect)",
+        )
     if flags & FLAG_COMMAND:
-        return ProtocolError(device, asked, f"command error (answer code {code}): the camera "
-                             "does not know this command", "check the camera model (VC-C4)")
+        return ProtocolError(
+            device,
+            asked,
+            f"command error (answer code {code}): the camera does not know this command",
+            "check the camera model (VC-C4)",
+        )
     if flags & FLAG_PARAMETER:
-        return OutOfRangeError(device, asked, f"parameter error (answer code {code}): value "
-                               "outside the movable range", "stay within the camera's limits")
+        return OutOfRangeError(
+            device,
+            asked,
+            f"parameter error (answer code {code}): value outside the movable range",
+            "stay within the camera's limits",
+        )
     if flags & FLAG_SYSTEM:
-        return DeviceFaultError(device, asked, f"system error (answer code {code})",
-                                "power-cycle the camera")
+        return DeviceFaultError(
+            device, asked, f"system error (answer code {code})", "power-cycle the camera"
+        )
     if flags & FLAG_BUSY:
-        return DeviceBusyError(device, asked, f"busy (answer code {code}): an earlier motion, "
-                               "initialisation or power change is still running",
-                               "wait for it to finish or stop the head")
+        return DeviceBusyError(
+            device,
+            asked,
+            f"busy (answer code {code}): an earlier motion, "
+            "initialisation or power change is still running",
+            "wait for it to finish or stop the head",
+        )
     return ProtocolError(device, asked, f"unknown answer code {code}", "check the cable")
 
 
@@ -313,14 +331,14 @@ class AnswerParser:
         del self._buf[:start]
         buf = self._buf
         # FE D1 D2 E1 E2: device '0'..'9' pair, error code two hex digits
-        for i, byte in enumerate(buf[1:MIN_ANSWER - 1], start=1):
+        for i, byte in enumerate(buf[1 : MIN_ANSWER - 1], start=1):
             ok = (byte == 0x30) if i == 1 else (0x30 <= byte <= 0x39) if i == 2 else byte in _HEX
             if not ok:
                 self._drop(i)
                 raise self._garbled(f"byte {i} is {byte:02X}")
         end = buf.find(END, MIN_ANSWER - 1)
         limit = MIN_ANSWER + MAX_STATUS
-        body = buf[MIN_ANSWER - 1:end if end >= 0 else min(len(buf), limit)]
+        body = buf[MIN_ANSWER - 1 : end if end >= 0 else min(len(buf), limit)]
         for j, byte in enumerate(body, start=MIN_ANSWER - 1):
             if not 0x20 <= byte <= 0x7E:  # status payloads are printable ASCII
                 self._drop(j)
@@ -331,16 +349,20 @@ class AnswerParser:
                 raise self._garbled(f"no end mark within {limit} bytes")
             return None
         answer = Answer(buf[2] - 0x30, int(bytes(buf[3:5]), 16), bytes(buf[5:end]))
-        del buf[:end + 1]
+        del buf[: end + 1]
         return answer
 
     def _drop(self, upto: int) -> None:
         # Keep a header at ``upto`` (a new frame starting inside the bad one); drop the rest.
-        del self._buf[:max(upto, 1)]
+        del self._buf[: max(upto, 1)]
 
     def _garbled(self, what: str) -> ProtocolError:
-        return ProtocolError(self.device, "read an answer", f"garbled answer frame ({what})",
-                             "check the cable and the baud rate (9600 8N1)")
+        return ProtocolError(
+            self.device,
+            "read an answer",
+            f"garbled answer frame ({what})",
+            "check the cable and the baud rate (9600 8N1)",
+        )
 
 
 def describe(data: bytes) -> str:

@@ -87,13 +87,29 @@ def test_checksum_worked_sums() -> None:
     assert checksum(b"\x00") == 0
 
 
-SIP_GOLDEN = ("FA FB 21 33 E8 03 F4 01 00 04 64 00 78 00 7D 00 00 00 04 1F 00 00 02 00 F4 01 "
-              "01 B0 04 00 00 00 FF 00 10 33")
-SIP_EXT_GOLDEN = ("FA FB 2C 33 E8 03 F4 01 00 04 64 00 78 00 7D 00 00 00 04 1F 00 00 02 00 F4 01 "
-                  "01 B0 04 00 00 00 FF 00 7D 00 00 25 00 00 00 00 00 81 00 B6 B0")
-SIP_VALUES = Sip(moving=True, x=1000, y=500, th=1024, left_vel=100, right_vel=120, battery_dv=125,
-                 stall_bumpers=0, control=1024, flags=0x001F, compass=0,
-                 sonar=((0, 500), (1, 1200)), digin=0xFF)
+SIP_GOLDEN = (
+    "FA FB 21 33 E8 03 F4 01 00 04 64 00 78 00 7D 00 00 00 04 1F 00 00 02 00 F4 01 "
+    "01 B0 04 00 00 00 FF 00 10 33"
+)
+SIP_EXT_GOLDEN = (
+    "FA FB 2C 33 E8 03 F4 01 00 04 64 00 78 00 7D 00 00 00 04 1F 00 00 02 00 F4 01 "
+    "01 B0 04 00 00 00 FF 00 7D 00 00 25 00 00 00 00 00 81 00 B6 B0"
+)
+SIP_VALUES = Sip(
+    moving=True,
+    x=1000,
+    y=500,
+    th=1024,
+    left_vel=100,
+    right_vel=120,
+    battery_dv=125,
+    stall_bumpers=0,
+    control=1024,
+    flags=0x001F,
+    compass=0,
+    sonar=((0, 500), (1, 1200)),
+    digin=0xFF,
+)
 
 
 def test_sip_golden_both_ways() -> None:
@@ -107,8 +123,15 @@ def test_sip_golden_both_ways() -> None:
 
 
 def test_sip_extension_golden_both_ways() -> None:
-    ext = SipExtension(battery_dv=125, charge_state=0, rot_vel=37, fault_flags=0, lat_vel=0,
-                       temperature=-127, state_of_charge=0)
+    ext = SipExtension(
+        battery_dv=125,
+        charge_state=0,
+        rot_vel=37,
+        fault_flags=0,
+        lat_vel=0,
+        temperature=-127,
+        state_of_charge=0,
+    )
     sip = Sip(**{**SIP_VALUES.__dict__, "extension": ext})
     assert encode_sip(sip) == h(SIP_EXT_GOLDEN)
     parser = PacketParser("base")
@@ -117,8 +140,10 @@ def test_sip_extension_golden_both_ways() -> None:
 
 
 def test_sync2_golden_both_ways() -> None:
-    packet = h("FA FB 1E 02 4D 79 42 6F 74 00 50 69 6F 6E 65 65 72 00 70 65 6F 70 6C 65 62 6F "
-               "74 2D 73 68 00 69 2D")
+    packet = h(
+        "FA FB 1E 02 4D 79 42 6F 74 00 50 69 6F 6E 65 65 72 00 70 65 6F 70 6C 65 62 6F "
+        "74 2D 73 68 00 69 2D"
+    )
     assert sync2_reply("MyBot", "Pioneer", "peoplebot-sh") == packet
     parser = PacketParser("base")
     parser.feed(packet)
@@ -163,7 +188,7 @@ def test_parser_skips_junk_and_splits_back_to_back_packets() -> None:
     parser = PacketParser("base")
     stream = b"WMS2\r\xfa\x00junk" + command(Command.STOP) + command(Command.VEL, 5)
     for i in range(0, len(stream), 3):  # arrives in dribbles
-        parser.feed(stream[i:i + 3])
+        parser.feed(stream[i : i + 3])
     assert parser.next() == b"\x1d"
     assert parse_command(parser.next()).arg == 5
     assert parser.next() is None and not parser.partial

@@ -27,8 +27,6 @@ from twin.serial_twins.pty import PtyLink
 SCALE = 4.0  # the kinematic robot's clock runs this much faster than the wall
 
 
-
-
 @pytest.fixture
 def server(tmp_path: Path) -> Iterator[ArcosServer]:
     srv = serve_arcos(KinematicActuator(SCALE), PtyLink(tmp_path / "arcos"), aux1=EchoDevice())
@@ -80,8 +78,11 @@ def test_drive_moves_the_robot_and_the_pose_tracks_its_odometry(server: ArcosSer
 def test_go_to_ends_within_5_cm_and_3_degrees(server: ArcosServer) -> None:
     start = Pose2D(1.0, 1.0, 0.0)
     with base_on(server, start=start) as base:
-        for goal in (Pose2D(2.0, 1.5, math.pi / 2), Pose2D(1.2, 0.4, -2.5),
-                     Pose2D(1.21, 0.41, 1.0)):
+        for goal in (
+            Pose2D(2.0, 1.5, math.pi / 2),
+            Pose2D(1.2, 0.4, -2.5),
+            Pose2D(1.21, 0.41, 1.0),
+        ):
             pose = base.go_to(goal, timeout=20.0)
             truth = odometry_in_map(server, start)
             for p in (pose, truth):
@@ -106,8 +107,7 @@ def test_keepalive_holds_the_watchdog_off(server: ArcosServer) -> None:
         assert base.pose() is not None
 
 
-def test_robot_left_open_by_a_crashed_client_is_closed_and_resynced(
-        server: ArcosServer) -> None:
+def test_robot_left_open_by_a_crashed_client_is_closed_and_resynced(server: ArcosServer) -> None:
     crashed = base_on(server)
     crashed.connect()
     crashed._stop_link()  # a client that dies without CLOSE
@@ -162,8 +162,7 @@ def test_stall_during_motion_is_a_fault(server: ArcosServer) -> None:
             base.go_to(Pose2D(1.0, 0.0, 0.0))
 
 
-def test_hangup_mid_use_reconnects_through_the_still_open_handshake(
-        server: ArcosServer) -> None:
+def test_hangup_mid_use_reconnects_through_the_still_open_handshake(server: ArcosServer) -> None:
     start = Pose2D(1.0, 1.0, 0.0)
     with base_on(server, start=start) as base:
         base.drive(0.1, 0.0, 0.5)
@@ -214,8 +213,24 @@ def test_cli_status_and_drive(server: ArcosServer, capsys: pytest.CaptureFixture
     assert "robot: twin  class: Pioneer  subclass: peoplebot-sh" in out
     assert "battery: 12.6 V" in out and "stall/bumpers: clear" in out
     assert not server.emulator.motors_enabled
-    assert main(["hw", "arcos", "--port", server.path, "drive", "--vel", "100", "--rvel", "0",
-                 "--seconds", "0.5"]) == 0
+    assert (
+        main(
+            [
+                "hw",
+                "arcos",
+                "--port",
+                server.path,
+                "drive",
+                "--vel",
+                "100",
+                "--rvel",
+                "0",
+                "--seconds",
+                "0.5",
+            ]
+        )
+        == 0
+    )
     assert "drove" in capsys.readouterr().out
     assert server.emulator.actuator.odometry()[0] > 0.1
     assert main(["hw", "arcos", "--port", server.path + ".missing", "status"]) == 2

@@ -57,8 +57,10 @@ def test_handshake_bytes() -> None:
     assert emu.transmit(now) == bytes.fromhex("FA FB 03 01 00 01")
     emu.receive(command(Command.SYNC2), now)
     reply = emu.transmit(now)
-    assert reply == bytes.fromhex("FA FB 1E 02 4D 79 42 6F 74 00 50 69 6F 6E 65 65 72 00 70 65 "
-                                  "6F 70 6C 65 62 6F 74 2D 73 68 00 69 2D")
+    assert reply == bytes.fromhex(
+        "FA FB 1E 02 4D 79 42 6F 74 00 50 69 6F 6E 65 65 72 00 70 65 "
+        "6F 70 6C 65 62 6F 74 2D 73 68 00 69 2D"
+    )
     assert parse_sync2(packets(reply)[0]) == ("MyBot", "Pioneer", "peoplebot-sh")
 
 
@@ -105,9 +107,15 @@ def test_motion_needs_enable_and_follows_vel_rvel_vel2_stop() -> None:
     act = emu.actuator
     exchange(emu, command(Command.VEL, 200), now)
     assert act.velocity == (0.0, 0.0)  # motors off: ignored (allenh1/p2os#41)
-    exchange(emu, command(Command.ENABLE, 1) + command(Command.SETA, 10000)
-             + command(Command.SETA, -10000) + command(Command.SETRA, 10000)
-             + command(Command.SETRA, -10000), now)
+    exchange(
+        emu,
+        command(Command.ENABLE, 1)
+        + command(Command.SETA, 10000)
+        + command(Command.SETA, -10000)
+        + command(Command.SETRA, 10000)
+        + command(Command.SETRA, -10000),
+        now,
+    )
     exchange(emu, command(Command.VEL, 200) + command(Command.RVEL, -30), now)
     time.sleep(0.05)
     exchange(emu, b"", now + 0.05)

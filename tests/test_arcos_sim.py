@@ -49,7 +49,8 @@ def test_sips_arrive_at_10_hz(rig: tuple[SimRobot, ArcosBase]) -> None:
 
 
 def test_drive_moves_the_sim_and_the_pose_tracks_its_odometry(
-        rig: tuple[SimRobot, ArcosBase]) -> None:
+    rig: tuple[SimRobot, ArcosBase],
+) -> None:
     sim, base = rig
     before = truth(sim)
     pose = base.drive(0.1, math.radians(15), 1.0)
@@ -61,11 +62,14 @@ def test_drive_moves_the_sim_and_the_pose_tracks_its_odometry(
 
 
 def test_go_to_brings_the_sim_robot_within_5_cm_and_3_degrees(
-        rig: tuple[SimRobot, ArcosBase]) -> None:
+    rig: tuple[SimRobot, ArcosBase],
+) -> None:
     sim, base = rig
     here = base.pose()
-    for goal in (Pose2D(here.x + 0.4, here.y - 0.3, here.yaw - 1.2),
-                 Pose2D(here.x, here.y, here.yaw)):
+    for goal in (
+        Pose2D(here.x + 0.4, here.y - 0.3, here.yaw - 1.2),
+        Pose2D(here.x, here.y, here.yaw),
+    ):
         pose = base.go_to(goal, timeout=30.0)
         for p in (pose, odometry(sim), truth(sim)):
             assert p.distance_to(goal) < 0.05

@@ -12,6 +12,7 @@ import pytest
 # isort: off
 import twin.sim  # noqa: F401  (must come first: it selects headless GL before mujoco loads)
 import mujoco
+
 # isort: on
 from twin.core.geometry import CameraModel
 from twin.resources import models_dir, scenes_dir
@@ -63,7 +64,8 @@ def test_assets_script_reproduces_the_committed_files(tmp_path) -> None:
         committed = cv2.imread(str(models_dir() / "textures" / png.name))
         np.testing.assert_array_equal(cv2.imread(str(png)), committed, err_msg=png.name)
     assert (tmp_path / "bookcase_contents.xml").read_text() == (
-        models_dir() / "bookcase_contents.xml").read_text()
+        models_dir() / "bookcase_contents.xml"
+    ).read_text()
 
 
 def test_robot_is_peoplebot_sized_with_the_paper_camera() -> None:
@@ -84,14 +86,18 @@ def test_head_servos_carry_the_vcc4_limits_and_speeds() -> None:
     def actuator(name: str) -> int:
         return mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_ACTUATOR, name)
 
-    np.testing.assert_allclose(np.degrees(model.actuator_actrange[actuator("pan")]),
-                               [-100, 100], atol=1e-4)
-    np.testing.assert_allclose(np.degrees(model.actuator_actrange[actuator("tilt")]),
-                               [-30, 90], atol=1e-4)
-    np.testing.assert_allclose(np.degrees(model.actuator_ctrlrange[actuator("pan")]),
-                               [-90, 90], atol=1e-4)
-    np.testing.assert_allclose(np.degrees(model.actuator_ctrlrange[actuator("tilt")]),
-                               [-70, 70], atol=1e-4)
+    np.testing.assert_allclose(
+        np.degrees(model.actuator_actrange[actuator("pan")]), [-100, 100], atol=1e-4
+    )
+    np.testing.assert_allclose(
+        np.degrees(model.actuator_actrange[actuator("tilt")]), [-30, 90], atol=1e-4
+    )
+    np.testing.assert_allclose(
+        np.degrees(model.actuator_ctrlrange[actuator("pan")]), [-90, 90], atol=1e-4
+    )
+    np.testing.assert_allclose(
+        np.degrees(model.actuator_ctrlrange[actuator("tilt")]), [-70, 70], atol=1e-4
+    )
 
 
 def test_living_room_follows_the_papers_layout() -> None:

@@ -13,6 +13,7 @@ import pytest
 # isort: off
 import twin.sim  # noqa: F401  (must come first: it selects headless GL before mujoco loads)
 import mujoco
+
 # isort: on
 from twin.cli import main
 from twin.core.devices import (
@@ -74,8 +75,13 @@ def test_camera_height_and_fov_measured_from_a_render(pan_deg: float, bearing_de
 
 
 @pytest.mark.parametrize(
-    "goal", [Pose2D(2.3, 3.2, math.radians(45)), Pose2D(1.0, 1.4, math.radians(-90)),
-             Pose2D(3.0, 1.9, math.radians(180))])
+    "goal",
+    [
+        Pose2D(2.3, 3.2, math.radians(45)),
+        Pose2D(1.0, 1.4, math.radians(-90)),
+        Pose2D(3.0, 1.9, math.radians(180)),
+    ],
+)
 def test_driving_ends_within_5_cm_and_3_degrees(goal: Pose2D) -> None:
     robot = SimRobot(World("living_room"))
     estimate = robot.go_to(goal)
@@ -128,14 +134,18 @@ def test_pan_tilt_respects_speeds_and_reaches_its_targets() -> None:
     assert robot.world.time - t0 >= 3.0  # 30 deg at 10 deg/s
 
 
-@pytest.mark.parametrize(("pan", "tilt", "speed"), [(101, 0, None), (-101, 0, None),
-                                                     (0, -31, None), (0, 91, None),
-                                                     (10, 0, 91), (10, 0, 0)])
+@pytest.mark.parametrize(
+    ("pan", "tilt", "speed"),
+    [(101, 0, None), (-101, 0, None), (0, -31, None), (0, 91, None), (10, 0, 91), (10, 0, 0)],
+)
 def test_pan_tilt_rejects_what_the_vcc4_cannot_do(pan: float, tilt: float, speed) -> None:
     _, robot = make_sim_robot()
     with robot.pantilt as head, pytest.raises(OutOfRangeError, match="sim pan-tilt"):
-        head.move_to(math.radians(pan), math.radians(tilt),
-                     speed=None if speed is None else math.radians(speed))
+        head.move_to(
+            math.radians(pan),
+            math.radians(tilt),
+            speed=None if speed is None else math.radians(speed),
+        )
 
 
 def test_devices_need_connecting_and_capture_views_with_pose_and_pan() -> None:
@@ -230,8 +240,9 @@ def test_training_views_have_exact_masks_on_a_neutral_stage() -> None:
         (["sim", "drive", "--to", "2,2,0", "--scene", "attic"], "scene 'attic'"),
     ],
 )
-def test_cli_bad_input_is_one_line(argv: list[str], message: str, capsys, tmp_path,
-                                   monkeypatch) -> None:
+def test_cli_bad_input_is_one_line(
+    argv: list[str], message: str, capsys, tmp_path, monkeypatch
+) -> None:
     monkeypatch.chdir(tmp_path)
     assert main(argv) == 2
     err = capsys.readouterr().err

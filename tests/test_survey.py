@@ -345,8 +345,10 @@ def test_bad_configs_are_one_line_errors_naming_the_key(
 
 @pytest.mark.parametrize(
     ("edit", "match"),
-    [(("[mission]", "[mission]\nstopz = 1"), "mission.stopz: unknown key"),
-     (("[grid]", "[grid\n"), "not valid TOML")],
+    [
+        (("[mission]", "[mission]\nstopz = 1"), "mission.stopz: unknown key"),
+        (("[grid]", "[grid\n"), "not valid TOML"),
+    ],
 )
 def test_unknown_keys_and_broken_toml_are_named(tmp_path, model_cache, edit, match):
     path = tmp_path / "bad.toml"
@@ -363,6 +365,7 @@ def test_an_unknown_device_type_is_named_with_the_known_ones(tmp_path, model_cac
     path.write_text(text.replace('type = "sim"', 'type = "warp"', 1))
     with pytest.raises(InputError, match=r"robot\.camera\.type: unknown type 'warp'; use one of"):
         build_robot(load_config(path))
+
 
 def test_folders_are_never_overwritten_and_resume_needs_a_run(tmp_path, reduced_run, capsys):
     assert main(["survey", "--out", str(reduced_run), "--quiet"]) == 2

@@ -27,27 +27,38 @@ H = bytes.fromhex
 # -- golden bytes, host -> camera (A9 1-11) -----------------------------------------------------
 
 
-@pytest.mark.parametrize(("frame", "wire"), [
-    (codec.power(True), "FF 30 30 00 A0 31 EF"),
-    (codec.power(False), "FF 30 30 00 A0 30 EF"),
-    (codec.host_control(), "FF 30 30 00 90 30 EF"),
-    (codec.pan_tilt(codec.degrees_to_count(90), codec.degrees_to_count(-30)),
-     "FF 30 30 00 62 38 33 32 30 37 45 46 35 EF"),
-    (codec.pan_tilt(codec.degrees_to_count(45), codec.degrees_to_count(10)),
-     "FF 30 30 00 62 38 31 39 30 38 30 35 39 EF"),
-    (codec.pan_tilt(codec.degrees_to_count(-45.5), codec.degrees_to_count(20)),
-     "FF 30 30 00 62 37 45 36 43 38 30 42 32 EF"),
-    (codec.pan_speed(codec.degrees_to_count(90)), "FF 30 30 00 50 33 32 30 EF"),
-    (codec.tilt_speed(codec.degrees_to_count(69)), "FF 30 30 00 51 32 36 35 EF"),
-    (codec.zoom(1000), "FF 30 30 00 B3 30 33 45 38 EF"),
-    (codec.tilt_range(codec.degrees_to_count(-30), codec.degrees_to_count(88)),
-     "FF 30 30 00 64 31 37 45 46 35 38 33 30 45 EF"),
-    (codec.pan_tilt_request(), "FF 30 30 00 63 EF"),
-    (codec.zoom_request(), "FF 30 30 00 B4 30 EF"),
-    (codec.pan_tilt_stop(), "FF 30 30 00 53 30 EF"),
-    (codec.zoom_stop(), "FF 30 30 00 A2 30 EF"),
-    (codec.pedestal_init(), "FF 30 30 00 58 30 EF"),
-])
+@pytest.mark.parametrize(
+    ("frame", "wire"),
+    [
+        (codec.power(True), "FF 30 30 00 A0 31 EF"),
+        (codec.power(False), "FF 30 30 00 A0 30 EF"),
+        (codec.host_control(), "FF 30 30 00 90 30 EF"),
+        (
+            codec.pan_tilt(codec.degrees_to_count(90), codec.degrees_to_count(-30)),
+            "FF 30 30 00 62 38 33 32 30 37 45 46 35 EF",
+        ),
+        (
+            codec.pan_tilt(codec.degrees_to_count(45), codec.degrees_to_count(10)),
+            "FF 30 30 00 62 38 31 39 30 38 30 35 39 EF",
+        ),
+        (
+            codec.pan_tilt(codec.degrees_to_count(-45.5), codec.degrees_to_count(20)),
+            "FF 30 30 00 62 37 45 36 43 38 30 42 32 EF",
+        ),
+        (codec.pan_speed(codec.degrees_to_count(90)), "FF 30 30 00 50 33 32 30 EF"),
+        (codec.tilt_speed(codec.degrees_to_count(69)), "FF 30 30 00 51 32 36 35 EF"),
+        (codec.zoom(1000), "FF 30 30 00 B3 30 33 45 38 EF"),
+        (
+            codec.tilt_range(codec.degrees_to_count(-30), codec.degrees_to_count(88)),
+            "FF 30 30 00 64 31 37 45 46 35 38 33 30 45 EF",
+        ),
+        (codec.pan_tilt_request(), "FF 30 30 00 63 EF"),
+        (codec.zoom_request(), "FF 30 30 00 B4 30 EF"),
+        (codec.pan_tilt_stop(), "FF 30 30 00 53 30 EF"),
+        (codec.zoom_stop(), "FF 30 30 00 A2 30 EF"),
+        (codec.pedestal_init(), "FF 30 30 00 58 30 EF"),
+    ],
+)
 def test_command_frames_match_the_spec(frame: bytes, wire: str) -> None:
     assert frame == H(wire)
     # and the other way: the emulator's parser reads the golden frame back
@@ -75,15 +86,18 @@ def test_angle_counts_and_rounding() -> None:
 # -- golden bytes, camera -> host ---------------------------------------------------------------
 
 
-@pytest.mark.parametrize(("wire", "flags", "status"), [
-    ("FE 30 30 30 30 EF", 0x00, b""),
-    ("FE 30 30 31 30 EF", 0x10, b""),
-    ("FE 30 30 33 30 EF", 0x30, b""),
-    ("FE 30 30 35 30 EF", 0x50, b""),
-    ("FE 30 30 39 30 EF", 0x90, b""),
-    ("FE 30 30 30 30 38 33 32 30 37 45 46 35 EF", 0x00, b"83207EF5"),
-    ("FE 30 30 30 30 30 33 45 38 EF", 0x00, b"03E8"),
-])
+@pytest.mark.parametrize(
+    ("wire", "flags", "status"),
+    [
+        ("FE 30 30 30 30 EF", 0x00, b""),
+        ("FE 30 30 31 30 EF", 0x10, b""),
+        ("FE 30 30 33 30 EF", 0x30, b""),
+        ("FE 30 30 35 30 EF", 0x50, b""),
+        ("FE 30 30 39 30 EF", 0x90, b""),
+        ("FE 30 30 30 30 38 33 32 30 37 45 46 35 EF", 0x00, b"83207EF5"),
+        ("FE 30 30 30 30 30 33 45 38 EF", 0x00, b"03E8"),
+    ],
+)
 def test_answer_frames_both_ways(wire: str, flags: int, status: bytes) -> None:
     assert codec.answer_frame(flags, status) == H(wire)
     parser = codec.AnswerParser()
@@ -99,10 +113,17 @@ def test_position_and_zoom_answers_decode() -> None:
     assert codec.parse_hex(b"03E8") == 1000
 
 
-@pytest.mark.parametrize(("flags", "kind"), [
-    (0x10, DeviceBusyError), (0x30, ProtocolError), (0x50, OutOfRangeError),
-    (0x90, codec.ModeError), (0x11, DeviceFaultError), (0x02, ProtocolError),
-])
+@pytest.mark.parametrize(
+    ("flags", "kind"),
+    [
+        (0x10, DeviceBusyError),
+        (0x30, ProtocolError),
+        (0x50, OutOfRangeError),
+        (0x90, codec.ModeError),
+        (0x11, DeviceFaultError),
+        (0x02, ProtocolError),
+    ],
+)
 def test_every_error_code_is_typed(flags: int, kind: type) -> None:
     error = codec.error_for(flags, "VC-C4", "do it")
     assert type(error) is kind
@@ -159,8 +180,10 @@ def test_parser_fuzz_never_crashes_or_hangs(junk: bytes, chunks: list[bytes]) ->
 
 
 @settings(max_examples=200, deadline=None)
-@given(st.binary(max_size=50).filter(lambda b: 0xFE not in b),
-       st.binary(max_size=8, min_size=0).map(lambda b: bytes(0x30 + x % 10 for x in b)))
+@given(
+    st.binary(max_size=50).filter(lambda b: 0xFE not in b),
+    st.binary(max_size=8, min_size=0).map(lambda b: bytes(0x30 + x % 10 for x in b)),
+)
 def test_parser_finds_a_frame_after_any_junk(junk: bytes, status: bytes) -> None:
     parser = codec.AnswerParser()
     parser.feed(junk + codec.answer_frame(0, status))
@@ -225,16 +248,19 @@ def test_emulator_walks_through_the_init_sequence() -> None:
     assert _ask(emu, clock, codec.operation_status()) == codec.answer_frame(0, b"000")
 
 
-@pytest.mark.parametrize(("frame", "answer"), [
-    (codec.pan_tilt(890, 0), "FE 30 30 35 30 EF"),  # beyond the pan range
-    (codec.pan_tilt(0, 300), "FE 30 30 35 30 EF"),  # beyond the default +-30 tilt range
-    (codec.command_frame(0x62, b"8000"), "FE 30 30 35 30 EF"),  # wrong parameter length
-    (codec.command_frame(0x50, b"900"), "FE 30 30 35 30 EF"),  # speed too high
-    (codec.command_frame(0x62, b"80008g00"), "FE 30 30 35 30 EF"),  # not hex
-    (codec.command_frame(0x3F), "FE 30 30 33 30 EF"),  # unknown command
-    (codec.command_frame(0x87), "FE 30 30 30 30 56 43 2D 43 34 EF"),  # product name
-    (codec.zoom_max_request(), "FE 30 30 30 30 30 38 35 45 EF"),
-])
+@pytest.mark.parametrize(
+    ("frame", "answer"),
+    [
+        (codec.pan_tilt(890, 0), "FE 30 30 35 30 EF"),  # beyond the pan range
+        (codec.pan_tilt(0, 300), "FE 30 30 35 30 EF"),  # beyond the default +-30 tilt range
+        (codec.command_frame(0x62, b"8000"), "FE 30 30 35 30 EF"),  # wrong parameter length
+        (codec.command_frame(0x50, b"900"), "FE 30 30 35 30 EF"),  # speed too high
+        (codec.command_frame(0x62, b"80008g00"), "FE 30 30 35 30 EF"),  # not hex
+        (codec.command_frame(0x3F), "FE 30 30 33 30 EF"),  # unknown command
+        (codec.command_frame(0x87), "FE 30 30 30 30 56 43 2D 43 34 EF"),  # product name
+        (codec.zoom_max_request(), "FE 30 30 30 30 30 38 35 45 EF"),
+    ],
+)
 def test_emulator_error_codes(frame: bytes, answer: str) -> None:
     emu, clock, _ = _emulator(host_mode=True, pedestal_ready=True)
     assert _ask(emu, clock, frame) == H(answer)
@@ -250,9 +276,25 @@ def test_emulator_is_silent_for_other_devices_and_drops_early_commands() -> None
 
 
 @settings(max_examples=200, deadline=None)
-@given(st.lists(st.one_of(st.binary(max_size=30), st.sampled_from([
-    codec.pan_tilt(100, -50), codec.pan_tilt_request(), codec.host_control(), codec.power(True),
-    codec.pedestal_init(), codec.zoom(5), codec.operation_status(True)])), max_size=12))
+@given(
+    st.lists(
+        st.one_of(
+            st.binary(max_size=30),
+            st.sampled_from(
+                [
+                    codec.pan_tilt(100, -50),
+                    codec.pan_tilt_request(),
+                    codec.host_control(),
+                    codec.power(True),
+                    codec.pedestal_init(),
+                    codec.zoom(5),
+                    codec.operation_status(True),
+                ]
+            ),
+        ),
+        max_size=12,
+    )
+)
 def test_emulator_fuzz_answers_only_well_formed_frames(chunks: list[bytes]) -> None:
     emu, clock, _ = _emulator()
     parser = codec.AnswerParser()
@@ -264,10 +306,14 @@ def test_emulator_fuzz_answers_only_well_formed_frames(chunks: list[bytes]) -> N
 
 
 def test_emulator_faults() -> None:
-    emu, clock, _ = _emulator(host_mode=True, pedestal_ready=True,
-                              faults=VCC4Faults(junk=b"xx", junk_count=1, truncate_count=1))
-    assert _ask(emu, clock, codec.pan_tilt_request()) == b"xx" + H("FE 30 30 30 30 38 30 30 30 "
-                                                                    "38 30 30")
+    emu, clock, _ = _emulator(
+        host_mode=True,
+        pedestal_ready=True,
+        faults=VCC4Faults(junk=b"xx", junk_count=1, truncate_count=1),
+    )
+    assert _ask(emu, clock, codec.pan_tilt_request()) == b"xx" + H(
+        "FE 30 30 30 30 38 30 30 30 38 30 30"
+    )
     emu.faults.garble_count = 1
     assert _ask(emu, clock, codec.pan_tilt_request())[3] == 0xB0
     emu.faults.silent = True
@@ -300,8 +346,8 @@ class LoopTransport:
         while True:
             self.buffer += self.emulator.transmit(time.monotonic())
             if len(self.buffer) >= min(size, self.chunk) or time.monotonic() >= end:
-                out = bytes(self.buffer[:min(size, self.chunk)])
-                del self.buffer[:len(out)]
+                out = bytes(self.buffer[: min(size, self.chunk)])
+                del self.buffer[: len(out)]
                 return out
             time.sleep(0.001)
 
@@ -313,8 +359,7 @@ class LoopTransport:
 
 
 def _fast_timing() -> VCC4Timing:
-    return VCC4Timing(latency=0.003, baud=0, power_seconds=0.1, init_seconds=0.1,
-                      zoom_rate=20000)
+    return VCC4Timing(latency=0.003, baud=0, power_seconds=0.1, init_seconds=0.1, zoom_rate=20000)
 
 
 def _driver(chunk: int = 1000, **options: object) -> tuple[VCC4, VCC4Emulator, LoopTransport]:
@@ -326,6 +371,7 @@ def _driver(chunk: int = 1000, **options: object) -> tuple[VCC4, VCC4Emulator, L
 
 def codec_limits():  # a fast head: 900 deg/s, so moves take milliseconds
     from twin.core.devices import PanTiltLimits
+
     return PanTiltLimits(-1.8, 1.8, -0.6, 1.6, math.radians(900), math.radians(900))
 
 
@@ -359,8 +405,7 @@ def test_driver_reads_answers_handed_over_in_pieces() -> None:
     camera, _, _ = _driver(chunk=2, host_mode=True, pedestal_ready=True)
     with camera:
         camera.move_to(math.radians(-45), math.radians(20))
-        assert camera.position() == pytest.approx((math.radians(-45), math.radians(20)),
-                                                  abs=2e-3)
+        assert camera.position() == pytest.approx((math.radians(-45), math.radians(20)), abs=2e-3)
 
 
 def test_driver_recovers_from_one_bad_answer_and_types_persistent_ones() -> None:

@@ -32,20 +32,23 @@ def sim() -> Iterator[SimRobot]:
 
 @pytest.fixture
 def server(sim: SimRobot, tmp_path: Path) -> Iterator[ArcosServer]:
-    camera = VCC4Emulator(SimHeadActuator(sim), timing=VCC4Timing(power_seconds=0.2,
-                                                                  init_seconds=0.2))
+    camera = VCC4Emulator(
+        SimHeadActuator(sim), timing=VCC4Timing(power_seconds=0.2, init_seconds=0.2)
+    )
     with serve_arcos(sim, PtyLink(tmp_path / "arcos"), aux1=camera) as srv:
         yield srv
 
 
-def test_driver_moves_the_sim_head_through_the_aux_tunnel(sim: SimRobot,
-                                                          server: ArcosServer) -> None:
-    with ArcosBase.open(server.path) as base, VCC4(base.aux_transport(1),
-                                                   answer_timeout=1.0) as camera:
+def test_driver_moves_the_sim_head_through_the_aux_tunnel(
+    sim: SimRobot, server: ArcosServer
+) -> None:
+    with (
+        ArcosBase.open(server.path) as base,
+        VCC4(base.aux_transport(1), answer_timeout=1.0) as camera,
+    ):
         pan, tilt = camera.move_to(math.radians(-35), math.radians(20))
         with sim.lock:
-            assert sim.head() == pytest.approx((math.radians(-35), math.radians(20)),
-                                               abs=TOLERANCE)
+            assert sim.head() == pytest.approx((math.radians(-35), math.radians(20)), abs=TOLERANCE)
         assert (pan, tilt) == pytest.approx(sim.head(), abs=TOLERANCE)
         assert camera.zoom_to(300) == 300
 

@@ -39,8 +39,9 @@ def server(sim: SimRobot, tmp_path: Path) -> Iterator[VCC4Server]:
         yield srv
 
 
-def test_move_to_reaches_the_angle_in_the_sim_left_positive(sim: SimRobot,
-                                                            server: VCC4Server) -> None:
+def test_move_to_reaches_the_angle_in_the_sim_left_positive(
+    sim: SimRobot, server: VCC4Server
+) -> None:
     with VCC4.open(server.path) as camera:
         assert server.emulator.host_mode and server.emulator.pedestal_ready
         pan, tilt = camera.move_to(math.radians(40), math.radians(15))
@@ -77,8 +78,7 @@ def _top_pan_rate(sim: SimRobot, move: object) -> float:
 def test_speeds_are_respected(sim: SimRobot, server: VCC4Server) -> None:
     with VCC4.open(server.path) as camera:
         camera.move_to(0.0, 0.0)
-        slow = _top_pan_rate(sim, lambda: camera.move_to(math.radians(30),
-                                                         speed=math.radians(20)))
+        slow = _top_pan_rate(sim, lambda: camera.move_to(math.radians(30), speed=math.radians(20)))
         fast = _top_pan_rate(sim, lambda: camera.move_to(0.0))
         assert math.radians(15) < slow < math.radians(20) * 1.05
         assert fast > math.radians(60)
@@ -115,8 +115,9 @@ def test_hangup_mid_use_reopens_or_says_connection_lost(server: VCC4Server) -> N
     with VCC4.open(server.path) as camera:
         camera.move_to(math.radians(10))
         server.hangup()  # unplugged and plugged in again: a new pty behind the same path
-        assert camera.move_to(math.radians(-10))[0] == pytest.approx(math.radians(-10),
-                                                                      abs=TOLERANCE)
+        assert camera.move_to(math.radians(-10))[0] == pytest.approx(
+            math.radians(-10), abs=TOLERANCE
+        )
     # a transport handed in (as the AUX tunnel is) is not the driver's to reopen
     transport = SerialTransport(server.path, 9600, "VC-C4", rts=True)
     camera = VCC4(transport)

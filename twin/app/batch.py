@@ -123,7 +123,7 @@ class BatchSpec:
         if kinds != {"sim"}:
             raise InputError(
                 f"{self.config_name}: batch-survey runs in the simulation only; "
-                "give every robot device type = \"sim\""
+                'give every robot device type = "sim"'
             )
         return config
 

@@ -227,9 +227,7 @@ def _unwrap(ray, ref):
         raise
 
 
-def make_executor(
-    workers: int | None, kind: str = "local", address: str | None = None
-) -> Executor:
+def make_executor(workers: int | None, kind: str = "local", address: str | None = None) -> Executor:
     """The executor ``kind`` names ("local" or "ray") with ``workers`` concurrent tasks.
 
     local: an inline executor for one worker, a process pool for more (default: all cores);

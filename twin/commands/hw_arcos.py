@@ -38,10 +38,16 @@ def _describe(base: object) -> list[str]:
     sip = base.last_sip
     assert sip is not None
     name, kind, subclass = base.identity or ("?", "?", "?")
-    flags = [label for label, on in (("motors enabled", sip.motors_enabled),
-                                     ("sonar on", bool(sip.flags & 0x1E)),
-                                     ("STOP button pressed", sip.estop),
-                                     ("moving", sip.moving)) if on]
+    flags = [
+        label
+        for label, on in (
+            ("motors enabled", sip.motors_enabled),
+            ("sonar on", bool(sip.flags & 0x1E)),
+            ("STOP button pressed", sip.estop),
+            ("moving", sip.moving),
+        )
+        if on
+    ]
     return [
         f"robot: {name}  class: {kind}  subclass: {subclass}",
         f"odometry: x={sip.x} mm  y={sip.y} mm (15-bit, wrapping)  "
@@ -65,12 +71,16 @@ def _drive(args: argparse.Namespace) -> int:
     from hardware.arcos import ArcosBase
 
     if not all(map(math.isfinite, (args.vel, args.rvel, args.seconds))) or args.seconds < 0:
-        raise InputError("twin hw arcos drive: --vel, --rvel and --seconds must be finite, "
-                         "--seconds not negative")
+        raise InputError(
+            "twin hw arcos drive: --vel, --rvel and --seconds must be finite, "
+            "--seconds not negative"
+        )
     with ArcosBase.open(args.port, args.baud) as base:
         start = base.pose()
         pose = base.drive(args.vel / 1000.0, math.radians(args.rvel), args.seconds)
-        print(f"drove {1000 * start.distance_to(pose):.0f} mm, turned "
-              f"{math.degrees(start.heading_error_to(pose)):.1f} deg (odometry)")
+        print(
+            f"drove {1000 * start.distance_to(pose):.0f} mm, turned "
+            f"{math.degrees(start.heading_error_to(pose)):.1f} deg (odometry)"
+        )
         print("\n".join(_describe(base)))
     return 0

@@ -57,8 +57,10 @@ def _snapshot(args: argparse.Namespace) -> int:
         devices.pantilt.move_to(pan, tilt)
         view = devices.capture()
     out = write_png(args.out, view.image)
-    print(f"{out}: {view.image.shape[1]}x{view.image.shape[0]} from {_fmt(view.pose)}, "
-          f"pan {math.degrees(view.pan):.1f} deg, tilt {math.degrees(view.tilt):.1f} deg")
+    print(
+        f"{out}: {view.image.shape[1]}x{view.image.shape[0]} from {_fmt(view.pose)}, "
+        f"pan {math.degrees(view.pan):.1f} deg, tilt {math.degrees(view.tilt):.1f} deg"
+    )
     return 0
 
 
@@ -84,8 +86,10 @@ def _drive(args: argparse.Namespace) -> int:
     print(f"odometry  {_fmt(odometry)}   off goal {_error(odometry, goal)}")
     print(f"truth     {_fmt(truth)}   off goal {_error(truth, goal)}")
     print(f"odometry vs truth: {_error(odometry, truth)}")
-    print(f"simulated {world.time - sim0:.2f} s in {wall:.2f} s wall "
-          f"({(world.time - sim0) / max(wall, 1e-9):.0f}x real time)")
+    print(
+        f"simulated {world.time - sim0:.2f} s in {wall:.2f} s wall "
+        f"({(world.time - sim0) / max(wall, 1e-9):.0f}x real time)"
+    )
     return 0
 
 
@@ -100,17 +104,25 @@ def _contact_sheet(args: argparse.Namespace) -> int:
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
-    parser = subparsers.add_parser("sim", help="the MuJoCo twin: snapshots, driving, contact sheet",
-                                   description=__doc__)
+    parser = subparsers.add_parser(
+        "sim", help="the MuJoCo twin: snapshots, driving, contact sheet", description=__doc__
+    )
     commands = parser.add_subparsers(dest="sim_command", metavar="SIM_COMMAND", required=True)
 
     def scene_flag(p: argparse.ArgumentParser) -> None:
-        p.add_argument("--scene", default="living_room",
-                       help="scene name in scenes/ or an MJCF path (default: living_room)")
+        p.add_argument(
+            "--scene",
+            default="living_room",
+            help="scene name in scenes/ or an MJCF path (default: living_room)",
+        )
 
     snap = commands.add_parser("snapshot", help="render the robot camera's view from a pose")
-    snap.add_argument("--pose", required=True, metavar="X,Y,YAW_DEG",
-                      help="robot pose: metres and degrees in the map frame")
+    snap.add_argument(
+        "--pose",
+        required=True,
+        metavar="X,Y,YAW_DEG",
+        help="robot pose: metres and degrees in the map frame",
+    )
     snap.add_argument("--pan", default="0", metavar="DEG", help="pan, positive left (default 0)")
     snap.add_argument("--tilt", default="0", metavar="DEG", help="tilt, positive up (default 0)")
     snap.add_argument("--out", required=True, metavar="PNG", help="where to write the image")
@@ -119,17 +131,22 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
     drive = commands.add_parser("drive", help="drive to a pose; report odometry against truth")
     drive.add_argument("--to", required=True, metavar="X,Y,YAW_DEG", help="goal pose")
-    drive.add_argument("--from", dest="start", metavar="X,Y,YAW_DEG",
-                       help="start pose (default: the scene's start)")
-    drive.add_argument("--timeout", type=float, default=60.0,
-                       help="simulated seconds allowed (default 60)")
+    drive.add_argument(
+        "--from",
+        dest="start",
+        metavar="X,Y,YAW_DEG",
+        help="start pose (default: the scene's start)",
+    )
+    drive.add_argument(
+        "--timeout", type=float, default=60.0, help="simulated seconds allowed (default 60)"
+    )
     scene_flag(drive)
     drive.set_defaults(handler=_drive)
 
-    sheet = commands.add_parser("contact-sheet",
-                                help="8 views from each of 5 stops, tiled into one PNG")
+    sheet = commands.add_parser(
+        "contact-sheet", help="8 views from each of 5 stops, tiled into one PNG"
+    )
     sheet.add_argument("--out", default="docs/contact_sheet.png", metavar="PNG")
-    sheet.add_argument("--scale", type=float, default=0.5,
-                       help="tile scale, 0.1-1 (default 0.5)")
+    sheet.add_argument("--scale", type=float, default=0.5, help="tile scale, 0.1-1 (default 0.5)")
     scene_flag(sheet)
     sheet.set_defaults(handler=_contact_sheet)

@@ -107,16 +107,27 @@ class PanTiltLimits:
             raise OutOfRangeError(device, asked, "the angles are not finite", "pass numbers")
         if not self.pan_min <= pan <= self.pan_max:
             raise OutOfRangeError(
-                device, asked, f"pan outside [{math.degrees(self.pan_min):.1f}, "
-                f"{math.degrees(self.pan_max):.1f}] deg", "turn the base for wider headings")
+                device,
+                asked,
+                f"pan outside [{math.degrees(self.pan_min):.1f}, "
+                f"{math.degrees(self.pan_max):.1f}] deg",
+                "turn the base for wider headings",
+            )
         if not self.tilt_min <= tilt <= self.tilt_max:
             raise OutOfRangeError(
-                device, asked, f"tilt outside [{math.degrees(self.tilt_min):.1f}, "
-                f"{math.degrees(self.tilt_max):.1f}] deg", "choose a reachable tilt")
+                device,
+                asked,
+                f"tilt outside [{math.degrees(self.tilt_min):.1f}, "
+                f"{math.degrees(self.tilt_max):.1f}] deg",
+                "choose a reachable tilt",
+            )
         if speed is not None and not 0.0 < speed <= self.pan_speed:
             raise OutOfRangeError(
-                device, f"{asked} at {speed!r} rad/s", "speed outside (0, "
-                f"{self.pan_speed:.3f}] rad/s", "use a positive speed within the unit's maximum")
+                device,
+                f"{asked} at {speed!r} rad/s",
+                f"speed outside (0, {self.pan_speed:.3f}] rad/s",
+                "use a positive speed within the unit's maximum",
+            )
 
 
 # The Canon VC-C4's mechanical limits and top speeds (specs/protocols.md, section A6).
@@ -152,15 +163,23 @@ class Device(ABC):
 
     def require_connected(self, asked: str) -> None:
         if not self.is_connected:
-            raise NotConnectedError(self.name, asked, "the device is not connected",
-                                    "use it inside 'with device:' or call connect() first")
+            raise NotConnectedError(
+                self.name,
+                asked,
+                "the device is not connected",
+                "use it inside 'with device:' or call connect() first",
+            )
 
     def __enter__(self) -> Device:
         self.connect()
         return self
 
-    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
-                 tb: TracebackType | None) -> None:
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
         self.close()
 
 
@@ -185,8 +204,9 @@ class PanTilt(Device):
     def limits(self) -> PanTiltLimits: ...
 
     @abstractmethod
-    def move_to(self, pan: float, tilt: float = 0.0, *, speed: float | None = None,
-                timeout: float = 10.0) -> tuple[float, float]:
+    def move_to(
+        self, pan: float, tilt: float = 0.0, *, speed: float | None = None, timeout: float = 10.0
+    ) -> tuple[float, float]:
         """Move and wait until there; ``speed`` (rad/s) caps pan and tilt speed (default: the
         unit's top speeds). Returns the reached (pan, tilt). ``OutOfRangeError`` if
         unreachable, ``DeviceTimeoutError`` if not there within ``timeout`` seconds."""
@@ -261,8 +281,12 @@ class Robot:
         self.connect()
         return self
 
-    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
-                 tb: TracebackType | None) -> None:
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
         self.close()
 
     def capture(self) -> View:

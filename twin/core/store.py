@@ -85,8 +85,7 @@ def load_arrays(
             arrays = {name: archive[name] for name in archive.files}
     except (OSError, ValueError, zipfile.BadZipFile, EOFError) as exc:
         raise FileFormatError(
-            f"{source}: not a readable {kind} file ({exc.__class__.__name__}: {exc}); "
-            "re-create it"
+            f"{source}: not a readable {kind} file ({exc.__class__.__name__}: {exc}); re-create it"
         ) from exc
     raw_header = arrays.pop(_HEADER_KEY, None)
     if raw_header is None:

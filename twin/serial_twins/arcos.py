@@ -71,8 +71,12 @@ class DriveFaults:
 
     def word(self) -> int:
         """The SIP's STALL AND BUMPERS word (section B6)."""
-        return (int(self.left_stall) | (self.rear_bumpers & 0x7F) << 1
-                | int(self.right_stall) << 8 | (self.front_bumpers & 0x7F) << 9)
+        return (
+            int(self.left_stall)
+            | (self.rear_bumpers & 0x7F) << 1
+            | int(self.right_stall) << 8
+            | (self.front_bumpers & 0x7F) << 9
+        )
 
 
 class DriveActuator(Protocol):
@@ -99,8 +103,9 @@ class KinematicActuator:
 
     track = PEOPLEBOT_TRACK
 
-    def __init__(self, time_scale: float = 1.0,
-                 start: tuple[float, float, float] = (0.0, 0.0, 0.0)) -> None:
+    def __init__(
+        self, time_scale: float = 1.0, start: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    ) -> None:
         self.time_scale = time_scale
         self._t0 = time.monotonic()
         self._last = 0.0
@@ -160,8 +165,10 @@ class SimActuator:
         self.track = sim.geometry.track
         self._stall_torque, self._stall_time = STALL_TORQUE, STALL_TIME
         model = sim.world.model
-        self._wheel_act = [mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_ACTUATOR, n)
-                           for n in ("left_wheel", "right_wheel")]
+        self._wheel_act = [
+            mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_ACTUATOR, n)
+            for n in ("left_wheel", "right_wheel")
+        ]
         self._strain_since: list[float | None] = [None, None]
         with sim.lock:
             self._origin = sim.odometry_pose()
@@ -232,10 +239,18 @@ class ArcosEmulator:
     and watchdog run in wall time, like a real controller's; motion runs on the actuator's
     clock)."""
 
-    def __init__(self, actuator: DriveActuator, aux1: ByteDevice | None = None, *,
-                 name: str = "twin", robot_class: str = "Pioneer",
-                 subclass: str = "peoplebot-sh", sip_period: float = 0.1,
-                 watchdog: float = 2.0, battery: float = 12.6) -> None:
+    def __init__(
+        self,
+        actuator: DriveActuator,
+        aux1: ByteDevice | None = None,
+        *,
+        name: str = "twin",
+        robot_class: str = "Pioneer",
+        subclass: str = "peoplebot-sh",
+        sip_period: float = 0.1,
+        watchdog: float = 2.0,
+        battery: float = 12.6,
+    ) -> None:
         self.actuator, self.aux1 = actuator, aux1
         self.identity = (name, robot_class, subclass)
         self.sip_period, self.watchdog, self.battery = sip_period, watchdog, battery
@@ -305,7 +320,7 @@ class ArcosEmulator:
             packet = packet[:-1] + bytes([packet[-1] ^ 0x5A])
         elif f.truncate > 0:
             f.truncate -= 1
-            packet = packet[:len(packet) // 2]
+            packet = packet[: len(packet) // 2]
         self._out += packet
 
     # -- commands --
@@ -475,8 +490,12 @@ class ArcosEmulator:
             del self._aux_in[:n]
 
     def moving(self) -> bool:
-        return (abs(self._v) > 0.5 or abs(self._w) > 0.05 or self._trans[0] == "move"
-                or (self._rot[0] == "head" and not self._head_settled))
+        return (
+            abs(self._v) > 0.5
+            or abs(self._w) > 0.05
+            or self._trans[0] == "move"
+            or (self._rot[0] == "head" and not self._head_settled)
+        )
 
     def sip(self) -> Sip:
         x, y, th = self._pose()
@@ -488,11 +507,19 @@ class ArcosEmulator:
         if self._rot[0] == "head":
             control = round(self._rot[1] / 360.0 * ANGLE_UNITS) % ANGLE_UNITS
         battery_dv = round(self.battery * 10)
-        return Sip(moving=self.moving(), x=round(x), y=round(y), th=th_units,
-                   left_vel=round(self._v - half), right_vel=round(self._v + half),
-                   battery_dv=battery_dv, stall_bumpers=self.actuator.faults().word(),
-                   control=control, flags=flags,
-                   extension=SipExtension(battery_dv=battery_dv, rot_vel=round(self._w * 10)))
+        return Sip(
+            moving=self.moving(),
+            x=round(x),
+            y=round(y),
+            th=th_units,
+            left_vel=round(self._v - half),
+            right_vel=round(self._v + half),
+            battery_dv=battery_dv,
+            stall_bumpers=self.actuator.faults().word(),
+            control=control,
+            flags=flags,
+            extension=SipExtension(battery_dv=battery_dv, rot_vel=round(self._w * 10)),
+        )
 
 
 # -- on a pseudo-terminal ----------------------------------------------------------------------
@@ -543,8 +570,12 @@ class ArcosServer:
         self.stop()
 
 
-def serve_arcos(sim_or_actuator: SimRobot | DriveActuator, link: PtyLink | None = None,
-                aux1: ByteDevice | None = None, **options: object) -> ArcosServer:
+def serve_arcos(
+    sim_or_actuator: SimRobot | DriveActuator,
+    link: PtyLink | None = None,
+    aux1: ByteDevice | None = None,
+    **options: object,
+) -> ArcosServer:
     """Start an emulated ARCOS base on ``link`` (a new pseudo-terminal if None) driving a
     ``SimRobot`` (through ``SimActuator``) or any ``DriveActuator``; ``aux1`` is the device on
     the robot's AUX1 port; ``options`` go to ``ArcosEmulator`` (name, sip_period, watchdog...).

@@ -87,8 +87,9 @@ class SimHeadActuator:
 class KinematicHead:
     """A head that moves at constant speed per axis in ``clock`` time: for unit tests."""
 
-    def __init__(self, clock: Callable[[], float] = time.monotonic,
-                 limits: PanTiltLimits = VCC4_LIMITS) -> None:
+    def __init__(
+        self, clock: Callable[[], float] = time.monotonic, limits: PanTiltLimits = VCC4_LIMITS
+    ) -> None:
         self.clock, self.limits = clock, limits
         self._start = (0.0, 0.0)
         self._goal = (0.0, 0.0)
@@ -155,10 +156,18 @@ class VCC4Emulator:
     """The camera's state machine. Thread-safe: ``receive``/``transmit`` may come from the pty
     server's thread or the ARCOS emulator's, settings and ``faults`` from a test."""
 
-    def __init__(self, head: HeadActuator, *, device: int = 0, camera_on: bool = True,
-                 host_mode: bool = False, pedestal_ready: bool = False,
-                 zoom_max: int = _ZOOM_MAX, timing: VCC4Timing | None = None,
-                 faults: VCC4Faults | None = None) -> None:
+    def __init__(
+        self,
+        head: HeadActuator,
+        *,
+        device: int = 0,
+        camera_on: bool = True,
+        host_mode: bool = False,
+        pedestal_ready: bool = False,
+        zoom_max: int = _ZOOM_MAX,
+        timing: VCC4Timing | None = None,
+        faults: VCC4Faults | None = None,
+    ) -> None:
         self.head, self.device = head, device
         self.camera_on, self.host_mode, self.pedestal_ready = camera_on, host_mode, pedestal_ready
         self.zoom_max = zoom_max
@@ -195,8 +204,8 @@ class VCC4Emulator:
                         del self._inbox[:1]
                         continue
                     return
-                frame = bytes(self._inbox[:end + 1])
-                del self._inbox[:end + 1]
+                frame = bytes(self._inbox[: end + 1])
+                del self._inbox[: end + 1]
                 if self._outbox and self._outbox[-1][0] > now:
                     continue  # manual A7: a command before the last answer went out is dropped
                 command = codec.parse_command(frame)
@@ -254,8 +263,10 @@ class VCC4Emulator:
     def _position_counts(self) -> tuple[int, int]:
         pan, tilt = self.head.position()
         # the wire's pan is positive right
-        return (round(-math.degrees(pan) / codec.DEGREES_PER_COUNT),
-                round(math.degrees(tilt) / codec.DEGREES_PER_COUNT))
+        return (
+            round(-math.degrees(pan) / codec.DEGREES_PER_COUNT),
+            round(math.degrees(tilt) / codec.DEGREES_PER_COUNT),
+        )
 
     def operation_status(self, now: float) -> int:
         bits = 0
@@ -374,8 +385,12 @@ class VCC4Emulator:
         return 0, b""
 
     def _cmd_speed_limit(self, p: bytes, now: float) -> tuple[int, bytes]:
-        values = (codec.PAN_SPEED_MIN, codec.PAN_SPEED_MAX, codec.TILT_SPEED_MIN,
-                  codec.TILT_SPEED_MAX)
+        values = (
+            codec.PAN_SPEED_MIN,
+            codec.PAN_SPEED_MAX,
+            codec.TILT_SPEED_MIN,
+            codec.TILT_SPEED_MAX,
+        )
         return 0, codec.hex_digits(values[_choice(p, b"0123")], 3)
 
     def _cmd_pulse_ratio(self, p: bytes, now: float) -> tuple[int, bytes]:
@@ -391,8 +406,10 @@ class VCC4Emulator:
         pan, tilt = codec.decode_pan_tilt(p)
         if (refused := self._needs_pedestal(now)) is not None:
             return refused
-        if not (self.pan_range[0] <= pan <= self.pan_range[1]
-                and self.tilt_range[0] <= tilt <= self.tilt_range[1]):
+        if not (
+            self.pan_range[0] <= pan <= self.pan_range[1]
+            and self.tilt_range[0] <= tilt <= self.tilt_range[1]
+        ):
             raise ValueError((pan, tilt))
         self._move(pan, tilt)
         return 0, b""
@@ -556,8 +573,9 @@ class VCC4Server:
         self.stop()
 
 
-def serve_vcc4(sim_or_head: Any, link: PtyLink | None = None,
-               **emulator_options: Any) -> VCC4Server:
+def serve_vcc4(
+    sim_or_head: Any, link: PtyLink | None = None, **emulator_options: Any
+) -> VCC4Server:
     """Start an emulated VC-C4 on a pseudo-terminal, moving ``sim_or_head``: a ``SimRobot``
     (wrapped in ``SimHeadActuator``; keep a ``WorldRunner`` stepping it) or a ``HeadActuator``.
     ``emulator_options`` go to ``VCC4Emulator``. Returns the running server (``.path``)."""

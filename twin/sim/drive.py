@@ -80,8 +80,13 @@ class GoToController:
     servo lag still land inside it.
     """
 
-    def __init__(self, goal: Pose2D, limits: DriveLimits = DriveLimits(),
-                 xy_tolerance: float = 0.01, yaw_tolerance: float = math.radians(0.7)) -> None:
+    def __init__(
+        self,
+        goal: Pose2D,
+        limits: DriveLimits = DriveLimits(),
+        xy_tolerance: float = 0.01,
+        yaw_tolerance: float = math.radians(0.7),
+    ) -> None:
         self.goal = goal
         self.limits = limits
         self.xy_tolerance = xy_tolerance
@@ -116,8 +121,9 @@ class GoToController:
                 if abs(err) < math.radians(1.0) and abs(self._w) < 0.05:
                     self.phase = "drive"
                 else:
-                    return self._ramp(0.0, _approach(err, lim.turn_rate, 0.5 * lim.turn_accel, 4.0),
-                                      dt)
+                    return self._ramp(
+                        0.0, _approach(err, lim.turn_rate, 0.5 * lim.turn_accel, 4.0), dt
+                    )
         if self.phase == "drive":
             along = dx * math.cos(pose.yaw) + dy * math.sin(pose.yaw)
             if along <= self.xy_tolerance * 0.5:

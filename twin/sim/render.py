@@ -31,8 +31,9 @@ class FrameRenderer:
     ``render`` call instead.
     """
 
-    def __init__(self, model: mujoco.MjModel, width: int, height: int,
-                 camera: str | None = None) -> None:
+    def __init__(
+        self, model: mujoco.MjModel, width: int, height: int, camera: str | None = None
+    ) -> None:
         if width > model.vis.global_.offwidth or height > model.vis.global_.offheight:
             raise TwinError(
                 f"a {width}x{height} image does not fit the model's offscreen buffer "
@@ -65,8 +66,9 @@ class FrameRenderer:
             raise TwinError(f"renderer for camera {self.camera!r} is closed; create a new one")
         return self._renderer
 
-    def render(self, data: mujoco.MjData,
-               free_camera: mujoco.MjvCamera | None = None) -> np.ndarray:
+    def render(
+        self, data: mujoco.MjData, free_camera: mujoco.MjvCamera | None = None
+    ) -> np.ndarray:
         """RGB image of the current state (a fresh array the caller may keep)."""
         renderer = self._active()
         if self._segmentation:
@@ -75,8 +77,9 @@ class FrameRenderer:
         renderer.update_scene(data, camera=self._camera_id if free_camera is None else free_camera)
         return renderer.render().copy()
 
-    def segment(self, data: mujoco.MjData,
-                free_camera: mujoco.MjvCamera | None = None) -> np.ndarray:
+    def segment(
+        self, data: mujoco.MjData, free_camera: mujoco.MjvCamera | None = None
+    ) -> np.ndarray:
         """Geom id per pixel (H x W int32), -1 where no geom is seen."""
         renderer = self._active()
         if not self._segmentation:
@@ -96,8 +99,12 @@ class FrameRenderer:
     def __enter__(self) -> FrameRenderer:
         return self
 
-    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
-                 tb: TracebackType | None) -> None:
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
         self.close()
 
 

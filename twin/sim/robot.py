@@ -50,8 +50,10 @@ def _fmt(pose: Pose2D) -> str:
 def _id(model: mujoco.MjModel, kind: mujoco.mjtObj, name: str) -> int:
     idx = mujoco.mj_name2id(model, kind, name)
     if idx < 0:
-        raise InputError(f"the scene has no {kind.name[6:].lower()} named {name!r}; "
-                         "does it include models/peoplebot.xml?")
+        raise InputError(
+            f"the scene has no {kind.name[6:].lower()} named {name!r}; "
+            "does it include models/peoplebot.xml?"
+        )
     return idx
 
 
@@ -62,37 +64,50 @@ class SimRobot:
     head controls and integrating odometry at every physics step.
     """
 
-    def __init__(self, world: World, start: Pose2D | None = None,
-                 limits: DriveLimits = GENTLE) -> None:
+    def __init__(
+        self, world: World, start: Pose2D | None = None, limits: DriveLimits = GENTLE
+    ) -> None:
         self.world = world
         m = world.model
         self.drive_limits = limits
         self._base = _id(m, mujoco.mjtObj.mjOBJ_BODY, "base")
         self._free_qpos = int(m.jnt_qposadr[_id(m, mujoco.mjtObj.mjOBJ_JOINT, "base")])
         self._free_qvel = int(m.jnt_dofadr[_id(m, mujoco.mjtObj.mjOBJ_JOINT, "base")])
-        self._wheel_qpos = [int(m.jnt_qposadr[_id(m, mujoco.mjtObj.mjOBJ_JOINT, n)])
-                            for n in ("left_wheel", "right_wheel")]
-        self._wheel_act = [_id(m, mujoco.mjtObj.mjOBJ_ACTUATOR, n)
-                           for n in ("left_wheel", "right_wheel")]
-        self._head_qpos = [int(m.jnt_qposadr[_id(m, mujoco.mjtObj.mjOBJ_JOINT, n)])
-                           for n in ("pan", "tilt")]
+        self._wheel_qpos = [
+            int(m.jnt_qposadr[_id(m, mujoco.mjtObj.mjOBJ_JOINT, n)])
+            for n in ("left_wheel", "right_wheel")
+        ]
+        self._wheel_act = [
+            _id(m, mujoco.mjtObj.mjOBJ_ACTUATOR, n) for n in ("left_wheel", "right_wheel")
+        ]
+        self._head_qpos = [
+            int(m.jnt_qposadr[_id(m, mujoco.mjtObj.mjOBJ_JOINT, n)]) for n in ("pan", "tilt")
+        ]
         self._head_act = [_id(m, mujoco.mjtObj.mjOBJ_ACTUATOR, n) for n in ("pan", "tilt")]
         self._head_actadr = [int(m.actuator_actadr[a]) for a in self._head_act]
-        self._head_qvel = [int(m.jnt_dofadr[_id(m, mujoco.mjtObj.mjOBJ_JOINT, n)])
-                           for n in ("pan", "tilt")]
+        self._head_qvel = [
+            int(m.jnt_dofadr[_id(m, mujoco.mjtObj.mjOBJ_JOINT, n)]) for n in ("pan", "tilt")
+        ]
         self.camera_id = _id(m, mujoco.mjtObj.mjOBJ_CAMERA, CAMERA_NAME)
         # geometry read from the model, so odometry and the MJCF cannot disagree
         wheel_geom = _id(m, mujoco.mjtObj.mjOBJ_GEOM, "left_wheel")
         left = m.body_pos[_id(m, mujoco.mjtObj.mjOBJ_BODY, "left_wheel")]
         right = m.body_pos[_id(m, mujoco.mjtObj.mjOBJ_BODY, "right_wheel")]
-        self.geometry = DiffDriveGeometry(float(m.geom_size[wheel_geom, 0]),
-                                          float(np.linalg.norm(left - right)))
+        self.geometry = DiffDriveGeometry(
+            float(m.geom_size[wheel_geom, 0]), float(np.linalg.norm(left - right))
+        )
         lo, hi = m.actuator_ctrlrange[self._head_act[0]]
         tlo, thi = m.actuator_ctrlrange[self._head_act[1]]
         plo, phi = m.actuator_actrange[self._head_act[0]]
         klo, khi = m.actuator_actrange[self._head_act[1]]
-        self.head_limits = PanTiltLimits(float(plo), float(phi), float(klo), float(khi),
-                                         float(min(-lo, hi)), float(min(-tlo, thi)))
+        self.head_limits = PanTiltLimits(
+            float(plo),
+            float(phi),
+            float(klo),
+            float(khi),
+            float(min(-lo, hi)),
+            float(min(-tlo, thi)),
+        )
         self._head_goal = [0.0, 0.0]
         self._head_speed = [self.head_limits.pan_speed, self.head_limits.tilt_speed]
         self._wheels = (0.0, 0.0)
@@ -112,8 +127,11 @@ class SimRobot:
         """Ground-truth pose of the base (map frame)."""
         d = self.world.data
         xmat = d.xmat[self._base].reshape(3, 3)
-        return Pose2D(float(d.xpos[self._base, 0]), float(d.xpos[self._base, 1]),
-                      math.atan2(xmat[1, 0], xmat[0, 0]))
+        return Pose2D(
+            float(d.xpos[self._base, 0]),
+            float(d.xpos[self._base, 1]),
+            math.atan2(xmat[1, 0], xmat[0, 0]),
+        )
 
     def odometry_pose(self) -> Pose2D:
         """The wheel-odometry estimate, anchored at the last ``place``/``set_pose``."""
@@ -141,11 +159,19 @@ class SimRobot:
         """
         self.head_limits.check("sim pan-tilt", pan, tilt)
         d = self.world.data
-        d.qpos[self._free_qpos:self._free_qpos + 7] = (
-            pose.x, pose.y, 0.0, math.cos(pose.yaw / 2), 0.0, 0.0, math.sin(pose.yaw / 2))
-        d.qvel[self._free_qvel:self._free_qvel + 6] = 0.0
-        for qadr, actadr, angle in zip(self._head_qpos, self._head_actadr, (pan, tilt),
-                                       strict=True):
+        d.qpos[self._free_qpos : self._free_qpos + 7] = (
+            pose.x,
+            pose.y,
+            0.0,
+            math.cos(pose.yaw / 2),
+            0.0,
+            0.0,
+            math.sin(pose.yaw / 2),
+        )
+        d.qvel[self._free_qvel : self._free_qvel + 6] = 0.0
+        for qadr, actadr, angle in zip(
+            self._head_qpos, self._head_actadr, (pan, tilt), strict=True
+        ):
             d.qpos[qadr] = angle
             d.act[actadr] = angle
         self._head_goal = [pan, tilt]
@@ -165,8 +191,9 @@ class SimRobot:
         d.ctrl[self._wheel_act[0]] = left
         d.ctrl[self._wheel_act[1]] = right
         # head: speed command that lands the integrated setpoint on the goal without overshoot
-        for act, actadr, goal, speed in zip(self._head_act, self._head_actadr, self._head_goal,
-                                            self._head_speed, strict=True):
+        for act, actadr, goal, speed in zip(
+            self._head_act, self._head_actadr, self._head_goal, self._head_speed, strict=True
+        ):
             d.ctrl[act] = float(np.clip((goal - d.act[actadr]) / dt, -speed, speed))
 
     def step(self) -> None:
@@ -182,14 +209,18 @@ class SimRobot:
         for _ in range(max(0, round(seconds / self.world.timestep))):
             self.step()
 
-    def _run_until(self, finished: Callable[[], bool], timeout: float, what: str,
-                   device: str) -> None:
+    def _run_until(
+        self, finished: Callable[[], bool], timeout: float, what: str, device: str
+    ) -> None:
         end = self.world.time + timeout
         while not finished():
             if self.world.time >= end:
-                raise DeviceTimeoutError(device, what, f"not finished after {timeout:g} s "
-                                         f"simulated (truth {_fmt(self.truth_pose())})",
-                                         "check the path is free or allow more time")
+                raise DeviceTimeoutError(
+                    device,
+                    what,
+                    f"not finished after {timeout:g} s simulated (truth {_fmt(self.truth_pose())})",
+                    "check the path is free or allow more time",
+                )
             self.step()
 
     # -- base -----------------------------------------------------------------------------------
@@ -208,9 +239,12 @@ class SimRobot:
             if self.world.time >= end:
                 self.set_wheel_speeds(0.0, 0.0)
                 raise DeviceTimeoutError(
-                    "sim base", f"go to {_fmt(goal)}", f"not there after {timeout:g} s "
+                    "sim base",
+                    f"go to {_fmt(goal)}",
+                    f"not there after {timeout:g} s "
                     f"simulated; odometry {_fmt(self.odometry_pose())}",
-                    "check that the path is free of furniture")
+                    "check that the path is free of furniture",
+                )
             self.set_wheel_speeds(*controller.command(self.odometry_pose(), dt))
             self.step()
             stalled_since = self._stall_check(stalled_since, f"go to {_fmt(goal)}")
@@ -231,9 +265,12 @@ class SimRobot:
             return self.world.time
         if self.world.time - since > STALL_TIME:
             self.set_wheel_speeds(0.0, 0.0)
-            raise DeviceFaultError("sim base", asked, "wheel motors stalled: the path "
-                                   f"is blocked at {_fmt(self.truth_pose())}",
-                                   "choose a stop with a free straight path to it")
+            raise DeviceFaultError(
+                "sim base",
+                asked,
+                f"wheel motors stalled: the path is blocked at {_fmt(self.truth_pose())}",
+                "choose a stop with a free straight path to it",
+            )
         return since
 
     def drive(self, speed: float, turn_rate: float, duration: float) -> Pose2D:
@@ -254,21 +291,29 @@ class SimRobot:
         VC-C4's top speeds) and return at once; the motion happens as time is stepped."""
         self.head_limits.check("sim pan-tilt", pan, tilt, speed)
         self._head_goal = [pan, tilt]
-        self._head_speed = [min(speed or math.inf, self.head_limits.pan_speed),
-                            min(speed or math.inf, self.head_limits.tilt_speed)]
+        self._head_speed = [
+            min(speed or math.inf, self.head_limits.pan_speed),
+            min(speed or math.inf, self.head_limits.tilt_speed),
+        ]
 
     def head_settled(self) -> bool:
         """True once the head rests within ``HEAD_TOLERANCE`` of its commanded angles."""
         still = max(map(abs, self.head_rates())) < math.radians(1.0)
-        return still and all(abs(a - g) < HEAD_TOLERANCE
-                             for a, g in zip(self.head(), self._head_goal, strict=True))
+        return still and all(
+            abs(a - g) < HEAD_TOLERANCE for a, g in zip(self.head(), self._head_goal, strict=True)
+        )
 
-    def move_head(self, pan: float, tilt: float, speed: float | None = None,
-                  timeout: float = 10.0) -> tuple[float, float]:
+    def move_head(
+        self, pan: float, tilt: float, speed: float | None = None, timeout: float = 10.0
+    ) -> tuple[float, float]:
         """Move the head and step the world until it has settled there; returns (pan, tilt)."""
         self.command_head(pan, tilt, speed)
-        self._run_until(self.head_settled, timeout, f"move to pan {math.degrees(pan):.1f} deg, "
-                        f"tilt {math.degrees(tilt):.1f} deg", "sim pan-tilt")
+        self._run_until(
+            self.head_settled,
+            timeout,
+            f"move to pan {math.degrees(pan):.1f} deg, tilt {math.degrees(tilt):.1f} deg",
+            "sim pan-tilt",
+        )
         return self.head()
 
     def stop_head(self) -> None:
@@ -302,11 +347,12 @@ class SimCamera(_SimDevice, Camera):
         super().__init__(robot)
         fovy = float(robot.world.model.cam_fovy[robot.camera_id])
         if abs(fovy - math.degrees(model.vfov)) > 0.01:
-            raise OutOfRangeError(self.name, f"render {model.width}x{model.height} at "
-                                  f"{math.degrees(model.hfov):.1f} deg hfov",
-                                  f"the MJCF camera has fovy {fovy:.3f} deg, not "
-                                  f"{math.degrees(model.vfov):.3f}",
-                                  "match the camera's fovy to CameraModel.vfov")
+            raise OutOfRangeError(
+                self.name,
+                f"render {model.width}x{model.height} at {math.degrees(model.hfov):.1f} deg hfov",
+                f"the MJCF camera has fovy {fovy:.3f} deg, not {math.degrees(model.vfov):.3f}",
+                "match the camera's fovy to CameraModel.vfov",
+            )
         self._model = model
         self._renderer: FrameRenderer | None = None
 
@@ -316,8 +362,9 @@ class SimCamera(_SimDevice, Camera):
 
     def connect(self) -> None:
         if self._renderer is None:
-            self._renderer = FrameRenderer(self.robot.world.model, self._model.width,
-                                           self._model.height, CAMERA_NAME)
+            self._renderer = FrameRenderer(
+                self.robot.world.model, self._model.width, self._model.height, CAMERA_NAME
+            )
         self._connected = True
 
     def close(self) -> None:
@@ -348,8 +395,9 @@ class SimPanTilt(_SimDevice, PanTilt):
     def limits(self) -> PanTiltLimits:
         return self.robot.head_limits
 
-    def move_to(self, pan: float, tilt: float = 0.0, *, speed: float | None = None,
-                timeout: float = 10.0) -> tuple[float, float]:
+    def move_to(
+        self, pan: float, tilt: float = 0.0, *, speed: float | None = None, timeout: float = 10.0
+    ) -> tuple[float, float]:
         self.require_connected("move")
         return self.robot.move_head(pan, tilt, speed, timeout)
 
@@ -373,8 +421,9 @@ class SimBase(_SimDevice, Base):
     def __init__(self, robot: SimRobot, pose_source: str = "odometry") -> None:
         super().__init__(robot)
         if pose_source not in self.POSE_SOURCES:
-            raise InputError(f"sim base pose source {pose_source!r}: use one of "
-                             f"{', '.join(self.POSE_SOURCES)}")
+            raise InputError(
+                f"sim base pose source {pose_source!r}: use one of {', '.join(self.POSE_SOURCES)}"
+            )
         self.pose_source = pose_source
 
     def connect(self) -> None:
@@ -403,11 +452,16 @@ class SimBase(_SimDevice, Base):
         asked = f"drive {speed} m/s, {turn_rate} rad/s for {duration} s"
         self.require_connected(asked)
         lim = self.robot.drive_limits
-        if not (abs(speed) <= lim.speed and abs(turn_rate) <= lim.turn_rate
-                and 0.0 <= duration <= 600.0):
-            raise OutOfRangeError(self.name, asked, f"limits are |speed| <= {lim.speed} m/s, "
-                                  f"|turn rate| <= {lim.turn_rate:.2f} rad/s, 0..600 s",
-                                  "use smaller values")
+        if not (
+            abs(speed) <= lim.speed and abs(turn_rate) <= lim.turn_rate and 0.0 <= duration <= 600.0
+        ):
+            raise OutOfRangeError(
+                self.name,
+                asked,
+                f"limits are |speed| <= {lim.speed} m/s, "
+                f"|turn rate| <= {lim.turn_rate:.2f} rad/s, 0..600 s",
+                "use smaller values",
+            )
         return self.robot.drive(speed, turn_rate, duration)
 
     def stop(self) -> None:
@@ -415,9 +469,12 @@ class SimBase(_SimDevice, Base):
         self.robot.set_wheel_speeds(0.0, 0.0)
 
 
-def make_sim_robot(scene: str = DEFAULT_SCENE, start: Pose2D | None = None,
-                   camera: CameraModel = PAPER_CAMERA,
-                   pose_source: str = "odometry") -> tuple[SimRobot, Robot]:
+def make_sim_robot(
+    scene: str = DEFAULT_SCENE,
+    start: Pose2D | None = None,
+    camera: CameraModel = PAPER_CAMERA,
+    pose_source: str = "odometry",
+) -> tuple[SimRobot, Robot]:
     """Load a scene, put the robot at ``start`` (default: the scene's), return both the
     ``SimRobot`` (ground truth, world) and its devices as a ``twin.core.devices.Robot``."""
     sim = SimRobot(World(scene), start)

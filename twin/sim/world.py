@@ -116,8 +116,9 @@ class World:
     def body_id(self, name: str) -> int:
         body = mujoco.mj_name2id(self.model, mujoco.mjtObj.mjOBJ_BODY, name)
         if body < 0:
-            raise InputError(f"{self.path.name}: no body named {name!r}; known: "
-                             f"{', '.join(self.body_names())}")
+            raise InputError(
+                f"{self.path.name}: no body named {name!r}; known: {', '.join(self.body_names())}"
+            )
         return body
 
     def body_names(self) -> list[str]:
@@ -140,14 +141,14 @@ class World:
         if idx < 0:
             return None
         start, size = int(self.model.text_adr[idx]), int(self.model.text_size[idx])
-        return bytes(self.model.text_data[start:start + size]).rstrip(b"\0").decode("utf-8")
+        return bytes(self.model.text_data[start : start + size]).rstrip(b"\0").decode("utf-8")
 
     def _custom_numeric(self, name: str) -> np.ndarray | None:
         idx = mujoco.mj_name2id(self.model, mujoco.mjtObj.mjOBJ_NUMERIC, name)
         if idx < 0:
             return None
         start, size = int(self.model.numeric_adr[idx]), int(self.model.numeric_size[idx])
-        return np.array(self.model.numeric_data[start:start + size], dtype=float)
+        return np.array(self.model.numeric_data[start : start + size], dtype=float)
 
     def targets(self) -> tuple[str, ...]:
         """Names of the bodies the scene declares as targets (custom text ``twin_targets``)."""
@@ -211,16 +212,21 @@ class World:
         """Raise ``InputError`` unless (x, y) is in the room and ``clearance`` metres from every
         wall and piece of furniture (e.g. the robot's radius, for a pose it should stand at)."""
         xmin, ymin, xmax, ymax = self.room_bounds()
-        if not (xmin + clearance <= x <= xmax - clearance
-                and ymin + clearance <= y <= ymax - clearance):
-            raise InputError(f"{what} ({x:.2f}, {y:.2f}) m is not {clearance:.2f} m inside the "
-                             f"room [{xmin:g}, {xmax:g}] x [{ymin:g}, {ymax:g}]; choose another")
+        if not (
+            xmin + clearance <= x <= xmax - clearance and ymin + clearance <= y <= ymax - clearance
+        ):
+            raise InputError(
+                f"{what} ({x:.2f}, {y:.2f}) m is not {clearance:.2f} m inside the "
+                f"room [{xmin:g}, {xmax:g}] x [{ymin:g}, {ymax:g}]; choose another"
+            )
         for name in self.furniture():
             gap = _distance_to_polygon(np.array([x, y]), self.footprint(name).polygon)
             if gap < clearance:
                 where = f"inside the {name}" if gap <= 0 else f"{gap:.2f} m from the {name}"
-                raise InputError(f"{what} ({x:.2f}, {y:.2f}) m is {where}, closer than "
-                                 f"{clearance:.2f} m; choose another")
+                raise InputError(
+                    f"{what} ({x:.2f}, {y:.2f}) m is {where}, closer than "
+                    f"{clearance:.2f} m; choose another"
+                )
 
     def path_clearance(self, start: tuple[float, float], end: tuple[float, float]) -> float:
         """Smallest distance (m) from the straight segment start-end to any furniture (negative
@@ -228,8 +234,7 @@ class World:
         length = math.dist(start, end)
         points = np.linspace(start, end, max(2, int(length / 0.02) + 1))
         polygons = [self.footprint(name).polygon for name in self.furniture()]
-        return min(_distance_to_polygon(point, polygon)
-                   for polygon in polygons for point in points)
+        return min(_distance_to_polygon(point, polygon) for polygon in polygons for point in points)
 
     # -- placing static objects -----------------------------------------------------------------
     def surface_height(self, x: float, y: float, exclude: str | None = None) -> float:
@@ -237,8 +242,16 @@ class World:
         geomid = np.zeros(1, dtype=np.int32)
         body_exclude = -1 if exclude is None else self.body_id(exclude)
         groups = np.array([1, 0, 0, 0, 0, 0], dtype=np.uint8)  # group 0: collidable things
-        dist = mujoco.mj_ray(self.model, self.data, np.array([x, y, 3.0]), np.array([0, 0, -1.0]),
-                             groups, True, body_exclude, geomid)
+        dist = mujoco.mj_ray(
+            self.model,
+            self.data,
+            np.array([x, y, 3.0]),
+            np.array([0, 0, -1.0]),
+            groups,
+            True,
+            body_exclude,
+            geomid,
+        )
         return 0.0 if dist < 0 else 3.0 - float(dist)
 
     def place_static_body(self, name: str, x: float, y: float, yaw: float) -> Pose2D:
@@ -252,12 +265,17 @@ class World:
             raise InputError(f"{name!r} is not a static body under the world; it cannot be placed")
         xmin, ymin, xmax, ymax = self.room_bounds()
         if not (xmin <= x <= xmax and ymin <= y <= ymax):
-            raise InputError(f"cannot place {name!r} at ({x:.2f}, {y:.2f}) m: outside the room "
-                             f"[{xmin}, {xmax}] x [{ymin}, {ymax}]")
+            raise InputError(
+                f"cannot place {name!r} at ({x:.2f}, {y:.2f}) m: outside the room "
+                f"[{xmin}, {xmax}] x [{ymin}, {ymax}]"
+            )
         # lowest point of the body's geoms below its frame (geoms assumed upright in it)
         aabb, pos = self.model.geom_aabb, self.model.geom_pos
-        bottom = min(float(pos[g, 2] + aabb[g, 2] - aabb[g, 5])
-                     for g in range(self.model.ngeom) if self.model.geom_bodyid[g] == body)
+        bottom = min(
+            float(pos[g, 2] + aabb[g, 2] - aabb[g, 5])
+            for g in range(self.model.ngeom)
+            if self.model.geom_bodyid[g] == body
+        )
         z = self.surface_height(x, y, exclude=name) - bottom
         self.model.body_pos[body] = (x, y, z)
         self.model.body_quat[body] = (math.cos(yaw / 2), 0.0, 0.0, math.sin(yaw / 2))
