@@ -30,7 +30,7 @@ import numpy as np
 
 from twin.core.devices import View
 from twin.core.errors import TwinError
-from twin.core.geometry import CameraModel, Footprint
+from twin.core.geometry import CameraModel, Footprint, Pose2D
 from twin.core.grid import AccumulatorGrid
 
 VIEWER_MEMORY_LIMIT = "1GiB"
@@ -49,26 +49,37 @@ class SceneInfo:
 
 @dataclass(frozen=True)
 class ViewRecord:
-    """Everything about one fused view that is worth showing."""
+    """Everything about one fused view that is worth showing (``Mission.observe`` returns it)."""
 
-    index: int
+    index: int  # the view's number in the mission, from 0
     stop: int
-    view: View
+    view: View  # the image, the pose its wedges were projected from, pan, tilt, timestamp
+    robot_time: float  # seconds on the mission's robot clock; continues across resumes
     camera: CameraModel
     camera_height: float
     patch_boxes: np.ndarray  # (rows, cols, 4) pixel boxes x0, y0, x1, y1
     scores: dict[str, np.ndarray]  # object -> (rows, cols) in [0, 1]
     wedges: np.ndarray  # (cols, 2) bearing intervals, radians, map frame
     column_values: dict[str, np.ndarray]  # object -> (cols,)
+    path: tuple[tuple[float, float, float], ...] = ()  # (x, y, yaw) of every view so far
+    truth_pose: Pose2D | None = None  # simulation only: where the base really stood
 
 
 class Recorder(Protocol):
-    def begin(self, scene: SceneInfo, grid: AccumulatorGrid) -> None: ...
+    def begin(self, scene: SceneInfo, grid: AccumulatorGrid, planned_views: int) -> None:
+        """Log what does not change (room, furniture, truth); ``planned_views`` is the mission's
+        length, for scales fixed over the whole run."""
+        ...
 
     def log_view(self, record: ViewRecord, grid: AccumulatorGrid) -> None: ...
 
+    def flush(self) -> None:
+        """Put everything logged so far on disk (or on the wire) before the mission checkpoints,
+        so that what the grid checkpoint holds, the recording holds."""
+        ...
+
     def end(self) -> None:
-        """Flush and close the recording (the mission is over)."""
+        """Flush and close the recording (the mission is over, or was interrupted)."""
         ...
 
     def wait(self) -> None:
@@ -79,10 +90,13 @@ class Recorder(Protocol):
 class NullRecorder:
     """Records nothing (``--rerun off``)."""
 
-    def begin(self, scene: SceneInfo, grid: AccumulatorGrid) -> None:
+    def begin(self, scene: SceneInfo, grid: AccumulatorGrid, planned_views: int) -> None:
         pass
 
     def log_view(self, record: ViewRecord, grid: AccumulatorGrid) -> None:
+        pass
+
+    def flush(self) -> None:
         pass
 
     def end(self) -> None:
@@ -195,7 +209,7 @@ class RerunRecorder:
 
     # -- the Recorder protocol ---------------------------------------------------------------
 
-    def begin(self, scene: SceneInfo, grid: AccumulatorGrid) -> None:
+    def begin(self, scene: SceneInfo, grid: AccumulatorGrid, planned_views: int) -> None:
         rr, log = self._rr, self.stream.log
         log("world", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
         x0, y0, x1, y1 = scene.extent
@@ -228,7 +242,7 @@ class RerunRecorder:
         rr, log = self._rr, self.stream.log
         view = record.view
         self.stream.set_time("view", sequence=record.index)
-        self.stream.set_time("robot_time", duration=view.timestamp)
+        self.stream.set_time("robot_time", duration=record.robot_time)
         pose = view.pose
         log(
             "world/robot",
@@ -252,6 +266,9 @@ class RerunRecorder:
         for name, values in record.column_values.items():
             self._log_wedges(name, view, record.wedges, values)
             self._log_grid(name, grid)
+
+    def flush(self) -> None:
+        self.stream.flush()
 
     def end(self) -> None:
         self.stream.flush()

@@ -70,8 +70,8 @@ def _fly(config, robot, context, out, options, resume, started, quiet, on_result
     detector = prepare_detector(config.objects, config.detector, config.cache, say)
     grid = _grid(config, out, resume)
     recorder = _recorder(out, options, resume)
-    recorder.begin(scene, grid)
     plan = plan_views(config.mission, robot.pantilt.limits)
+    recorder.begin(scene, grid, len(plan))
     setup_time = time.perf_counter() - setup_started
 
     from tqdm import tqdm

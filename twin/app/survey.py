@@ -207,6 +207,7 @@ def run_survey(
                 planned.index,
                 planned.stop,
                 view,
+                view.timestamp,
                 camera,
                 context.camera_height,
                 context.detector.patch_boxes(view.image.shape),

@@ -17,6 +17,7 @@ was seen, and what to do.
 from __future__ import annotations
 
 import math
+import time
 from abc import ABC, abstractmethod
 from dataclasses import dataclass
 from types import TracebackType
@@ -194,6 +195,11 @@ class Camera(Device):
     @abstractmethod
     def grab(self) -> Frame:
         """The newest frame taken after this call began (never a stale buffered one)."""
+
+    def now(self) -> float:
+        """The robot's clock, in seconds: the one frame timestamps are read on (simulated time
+        in the twin). A mission times its views on it, so a resumed run's clock continues."""
+        return time.monotonic()
 
 
 class PanTilt(Device):

@@ -379,6 +379,9 @@ class SimCamera(_SimDevice, Camera):
         with self.robot.lock:
             return Frame(self._renderer.render(self.robot.world.data), self.robot.world.time)
 
+    def now(self) -> float:
+        return self.robot.world.time
+
 
 class SimPanTilt(_SimDevice, PanTilt):
     name = "sim pan-tilt"
