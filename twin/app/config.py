@@ -1,30 +1,37 @@
-"""The survey run's configuration: a TOML file read into validated, typed settings.
+"""The mission's configuration: a TOML file (plus ``--set`` overrides) read into typed settings.
 
 Every mistake is a one-line ``ConfigError`` naming the file, the key and the problem, e.g.
-``survey.toml: mission.stops[2]: expected [x, y] in metres, got [1.0]``. Unknown keys are errors
-too, so a misspelt key never silently falls back to a default. Degrees appear only here (the
-file is for people); everything past this module is in radians and metres.
+``survey.toml: mission.stops[2]: expected [x, y] in metres, got [1.0]``; a key that came from
+``--set`` is named as such (``--set grid.fusion: expected one of ...``). Unknown keys are errors
+too, so a misspelt key never silently falls back to a default. Each device type declares its
+options as a dataclass (``twin.app.device_types``), so factories only see typed values. Degrees
+appear only here (the file is for people); everything past this module is in radians and metres.
 
-The shipped default, ``scenes/living_room_survey.toml``, runs the paper's mission in the twin.
+A config is named by a path, or by the name of a shipped one (``living_room_serial_twins``);
+the shipped default, ``scenes/living_room_survey.toml``, runs the paper's mission in the twin.
 """
 
 from __future__ import annotations
 
+import json
 import math
 import tomllib
-from collections.abc import Callable
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from twin.app.device_types import ROLES, device_type, types_of
 from twin.core.errors import InputError
 from twin.core.fusion import RULES, FusionRule, make_rule
 from twin.core.grid import GridSpec
+from twin.core.options import OptionError, parse_options
 from twin.resources import scenes_dir
 
 DEFAULT_CONFIG_NAME = "living_room_survey.toml"
 RERUN_MODES = ("save", "spawn", "serve", "off")
-DEVICE_ROLES = ("camera", "pantilt", "base")
+DEVICE_ROLES = ROLES
+TWIN_PORT = "twin"  # a serial device's port that names its serial twin (an emulator on a pty)
 
 
 class ConfigError(InputError):
@@ -33,11 +40,15 @@ class ConfigError(InputError):
 
 @dataclass(frozen=True)
 class DeviceConfig:
-    """One device: its ``type`` picks the implementation; ``options`` go to its factory."""
+    """One device: its ``type`` picks the implementation; ``options`` is that type's dataclass
+    (``twin.app.device_types``), already checked."""
 
     role: str
     type: str
-    options: dict[str, Any] = field(default_factory=dict)
+    options: Any
+
+    def option(self, name: str, default: Any = None) -> Any:
+        return getattr(self.options, name, default)
 
 
 @dataclass(frozen=True)
@@ -87,24 +98,65 @@ class SurveyConfig:
     rerun: str
     cache: Path
     twin_time_scale: float = 1.0  # serial twins: simulated seconds per wall-clock second
+    data: dict[str, Any] = field(default_factory=dict, repr=False)  # the TOML it was read from
+
+    @property
+    def uses_sim_world(self) -> bool:
+        """Whether the robot lives in the MuJoCo world (sim devices, or serial twins)."""
+        return any(d.type == "sim" or d.option("port") == TWIN_PORT for d in self.devices.values())
 
 
 def default_config_path() -> Path:
     return scenes_dir() / DEFAULT_CONFIG_NAME
 
 
-class _Table:
-    """A TOML table being read: remembers its key path for errors and which keys were used."""
+def shipped_configs() -> list[str]:
+    """The names of the mission configs shipped in scenes/ (``--config NAME`` finds them)."""
+    return sorted(p.stem for p in scenes_dir().glob("*.toml"))
 
-    def __init__(self, data: Any, path: str, source: str) -> None:
+
+def resolve_config(name: str | Path | None) -> Path:
+    """The config file ``name`` means: a file at that path, else (for a bare name) a shipped
+    config of that name, with or without ``.toml``; ``None`` is the shipped default."""
+    if name is None:
+        return default_config_path()
+    path = Path(name).expanduser()
+    if path.is_file():
+        return path
+    if path.is_dir():
+        raise ConfigError(f"--config {name}: is a folder; give a config file (.toml)")
+    if path.parent == Path():
+        for candidate in (scenes_dir() / path.name, scenes_dir() / f"{path.name}.toml"):
+            if candidate.is_file():
+                return candidate
+    raise ConfigError(
+        f"--config {name}: no such file, and no shipped config of that name; "
+        f"shipped: {', '.join(shipped_configs())}"
+    )
+
+
+class _Table:
+    """A TOML table being read: remembers its key path for errors and which keys were used.
+
+    ``overrides`` holds the dotted keys that came from ``--set``: an error about one of them
+    names ``--set`` rather than the file, so the user looks in the right place."""
+
+    def __init__(
+        self, data: Any, path: str, source: str, overrides: frozenset[str] = frozenset()
+    ) -> None:
+        self.path, self.source, self.overrides = path, source, overrides
         if not isinstance(data, dict):
-            raise ConfigError(f"{source}: {path or 'the file'}: expected a table")
-        self.data, self.path, self.source = data, path, source
+            raise self._error(path or "the file", "expected a table")
+        self.data = data
         self.used: set[str] = set()
 
-    def fail(self, key: str, problem: str) -> ConfigError:
-        where = f"{self.path}.{key}" if self.path else key
+    def _error(self, where: str, problem: str) -> ConfigError:
+        if any(where == key or where.startswith((f"{key}.", f"{key}[")) for key in self.overrides):
+            return ConfigError(f"--set {where}: {problem}")
         return ConfigError(f"{self.source}: {where}: {problem}")
+
+    def fail(self, key: str, problem: str) -> ConfigError:
+        return self._error(self._child(key), problem)
 
     def has(self, key: str) -> bool:
         return key in self.data
@@ -120,8 +172,8 @@ class _Table:
     def table(self, key: str, required: bool = True) -> _Table:
         self.used.add(key)
         if key not in self.data and not required:
-            return _Table({}, self._child(key), self.source)
-        return _Table(self.get(key), self._child(key), self.source)
+            return _Table({}, self._child(key), self.source, self.overrides)
+        return _Table(self.get(key), self._child(key), self.source, self.overrides)
 
     def number(
         self,
@@ -181,32 +233,99 @@ class _Table:
         return f"{self.path}.{key}" if self.path else key
 
 
+# -- reading -----------------------------------------------------------------------------------
+
+
+def read_toml(path: Path) -> dict[str, Any]:
+    """A config file's TOML, or a one-line ``ConfigError`` saying why it cannot be read."""
+    try:
+        return tomllib.loads(path.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise ConfigError(f"{path}: no such config file; check the path") from None
+    except IsADirectoryError:
+        raise ConfigError(f"{path}: is a folder; give a config file (.toml)") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ConfigError(f"{path}: cannot read it ({exc})") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError(f"{path.name}: not valid TOML ({exc}); fix the file") from None
+
+
+def apply_overrides(data: dict[str, Any], settings: Iterable[str]) -> tuple[dict, frozenset[str]]:
+    """``data`` with every ``KEY=VALUE`` of ``settings`` applied, and the set of keys set.
+
+    KEY is a dotted path into the tables (``grid.fusion``, ``robot.base.pose_source``); VALUE is
+    TOML (``4``, ``[0.0, 0.01]``, ``"normalized"``). Because a shell strips quotes, a VALUE that
+    is not TOML but a bare word (``normalized``) is taken as that string. Whether the key exists
+    and the value fits is checked with the rest of the config, which names ``--set`` in errors.
+    """
+    import copy
+
+    data = copy.deepcopy(data)
+    keys: set[str] = set()
+    for setting in settings:
+        key, sep, text = setting.partition("=")
+        key = key.strip()
+        parts = key.split(".")
+        if not sep or not key or any(not p.strip() for p in parts):
+            raise ConfigError(
+                f"--set {setting!r}: expected KEY=VALUE with a dotted KEY, "
+                "e.g. --set mission.views_per_stop=4"
+            )
+        value = _toml_value(key, text.strip())
+        table = data
+        for depth, part in enumerate(parts[:-1]):
+            child = table.setdefault(part, {})
+            if not isinstance(child, dict):
+                where = ".".join(parts[: depth + 1])
+                raise ConfigError(f"--set {key}: {where} is not a table, so it has no keys")
+            table = child
+        table[parts[-1]] = value
+        keys.add(key)
+    return data, frozenset(keys)
+
+
+def _toml_value(key: str, text: str) -> Any:
+    try:
+        return tomllib.loads(f"value = {text}")["value"]
+    except tomllib.TOMLDecodeError:
+        pass
+    if text and all(c.isalnum() or c in "_-./:" for c in text):
+        return text  # a bare word: a shell ate the quotes around a string
+    raise ConfigError(
+        f"--set {key}={text}: VALUE is not TOML (a number, true/false, a string or a [list]); "
+        "quote it for the shell, e.g. --set 'grid.extent=[0.0, 0.0, 4.5, 6.0]'"
+    )
+
+
 def load_config(
-    path: str | Path | None = None, base_dir: Path | None = None, folder: Path | None = None
+    path: str | Path | None = None,
+    base_dir: Path | None = None,
+    folder: Path | None = None,
+    overrides: Sequence[str] = (),
 ) -> SurveyConfig:
-    """Read and validate a survey config (the shipped default when ``path`` is None).
+    """Read and validate a mission config (a path, a shipped config's name, or the default),
+    with ``overrides`` (``KEY=VALUE`` strings, as ``--set`` gives them) applied.
 
     Relative paths inside the file (scene, model files) are taken relative to ``folder`` (the
     file's own folder by default: a run's copy of its config passes the original's), except
     ``run.out`` and ``run.cache``, relative to ``base_dir`` (default: the working directory),
     since they say where this run writes.
     """
-    source = Path(path) if path is not None else default_config_path()
-    name = source.name
-    try:
-        data = tomllib.loads(source.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise ConfigError(f"{source}: no such config file; check the path") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise ConfigError(f"{source}: cannot read it ({exc})") from None
-    except tomllib.TOMLDecodeError as exc:
-        raise ConfigError(f"{name}: not valid TOML ({exc}); fix the file") from None
-    return parse_config(data, name, folder or source.parent, base_dir or Path.cwd())
+    source = resolve_config(path)
+    data, keys = apply_overrides(read_toml(source), overrides)
+    return parse_config(data, source.name, folder or source.parent, base_dir or Path.cwd(), keys)
 
 
-def parse_config(data: dict[str, Any], source: str, folder: Path, base_dir: Path) -> SurveyConfig:
-    """Validate already-parsed TOML ``data`` (``source`` names it in errors)."""
-    root = _Table(data, "", source)
+def parse_config(
+    data: dict[str, Any],
+    source: str,
+    folder: Path,
+    base_dir: Path,
+    overrides: frozenset[str] = frozenset(),
+) -> SurveyConfig:
+    """Validate already-parsed TOML ``data`` (``source`` names it in errors; ``overrides`` are
+    the keys that came from ``--set``)."""
+    root = _Table(data, "", source, overrides)
     run = root.table("run", required=False)
     out = base_dir / run.string("out", "runs/survey")
     rerun = run.choice("rerun", RERUN_MODES, "save")
@@ -219,26 +338,28 @@ def parse_config(data: dict[str, Any], source: str, folder: Path, base_dir: Path
         raise scene_table.fail("file", f"no scene file {scene}; check the path")
     scene_table.finish()
 
-    devices_table = root.table("robot")
-    devices = {}
-    for role in DEVICE_ROLES:
-        table = devices_table.table(role)
-        kind = table.string("type")
-        options = {k: v for k, v in table.data.items() if k != "type"}
-        devices[role] = DeviceConfig(role, kind, options)
-    devices_table.finish()
-
+    devices = _devices(root.table("robot"))
     mission = _mission(root.table("mission"))
     grid = _grid(root.table("grid"))
     twins = root.table("serial_twins", required=False)
     time_scale = twins.number("time_scale", 1.0, lambda v: 0.0 < v <= 20.0, "a factor in (0, 20]")
     twins.finish()
-    detector_table = root.table("detector", required=False)
-    detector = dict(detector_table.data)
+    detector = _detector(root.table("detector", required=False))
     objects = _objects(root.table("objects"), folder)
     root.finish()
     return SurveyConfig(
-        source, scene, devices, mission, grid, objects, detector, out, rerun, cache, time_scale
+        source,
+        scene,
+        devices,
+        mission,
+        grid,
+        objects,
+        detector,
+        out,
+        rerun,
+        cache,
+        time_scale,
+        data,
     )
 
 
@@ -249,6 +370,47 @@ def _resolve(text: str, folder: Path, fallback: Path) -> Path:
         return candidate
     local = folder / candidate
     return local if local.exists() else fallback / candidate
+
+
+def _devices(robot: _Table) -> dict[str, DeviceConfig]:
+    devices = {}
+    for role in DEVICE_ROLES:
+        table = robot.table(role)
+        kind = table.string("type")
+        try:
+            declared = device_type(role, kind)
+        except KeyError:
+            raise table.fail(
+                "type", f"unknown type {kind!r}; use one of {', '.join(types_of(role))}"
+            ) from None
+        given = {k: v for k, v in table.data.items() if k != "type"}
+        try:
+            options = parse_options(declared.options, given, f"type {kind!r}")
+        except OptionError as exc:
+            raise table.fail(exc.key, exc.problem) from None
+        table.used.update(table.data)
+        devices[role] = DeviceConfig(role, kind, options)
+    robot.finish()
+    _check_wiring(robot, devices)
+    return devices
+
+
+def _check_wiring(robot: _Table, devices: dict[str, DeviceConfig]) -> None:
+    """What one device's options ask of another, checked before anything opens a port."""
+    head, base = devices["pantilt"], devices["base"]
+    if head.type != "vcc4":
+        return
+    pantilt = robot.table("pantilt")
+    if head.options.wiring == "aux" and base.type != "arcos":
+        raise pantilt.fail(
+            "wiring", '"aux" tunnels through the base\'s AUX port, so robot.base.type must be '
+            '"arcos"; or use wiring = "direct" with a port'
+        )  # fmt: skip
+    if head.options.wiring == "direct" and head.options.port is None:
+        raise pantilt.fail(
+            "port", f'give the serial port (e.g. /dev/ttyUSB0), or "{TWIN_PORT}" for its serial '
+            'twin; or use wiring = "aux" on an ARCOS base'
+        )  # fmt: skip
 
 
 def _mission(table: _Table) -> MissionConfig:
@@ -285,13 +447,17 @@ def _grid(table: _Table) -> GridConfig:
     fusion = table.choice("fusion", tuple(RULES), "accumulate")
     params: dict[str, float] = {}
     if fusion == "logodds":
-        unit = (lambda v: 0.0 <= v <= 1.0, "a rate in [0, 1]")
-        params = {
-            key: table.number(key, None if key != "threshold" else 0.5, *unit)
-            for key in ("p_fp", "p_fn", "threshold")
-        }
-        if params["p_fp"] is None or params["p_fn"] is None:
-            raise table.fail("p_fp", "logodds needs the detector's p_fp and p_fn (twin roc)")
+        rate = (lambda v: 0.0 <= v <= 1.0, "a rate in [0, 1]")
+        for key in ("p_fp", "p_fn", "threshold"):
+            if not table.has(key):
+                # No default: a threshold above every score the detector gives (0.5 is above
+                # all RFCH scores measured) would silently turn every column into evidence
+                # against the object. The detector's calibration (twin roc) gives all three.
+                raise table.fail(
+                    key, "logodds needs the detector's p_fp, p_fn and threshold; measure them "
+                    "with 'twin roc' (on rendered frames: p_fp 0.10, p_fn 0.05 at threshold 0.162)"
+                )  # fmt: skip
+            params[key] = table.number(key, ..., *rate)
     elif fusion == "normalized":
         params["min_observed"] = table.number(
             "min_observed", 1.0, lambda v: v >= 0.0, "a non-negative coverage"
@@ -302,9 +468,24 @@ def _grid(table: _Table) -> GridConfig:
     return GridConfig(spec, supersample, make_rule(fusion, **params), max_range, separation)
 
 
+def _detector(table: _Table) -> dict[str, Any]:
+    """The RFCH parameters (``twin.rfch.RFCHParams``), checked now rather than at training."""
+    from twin.rfch.params import RFCHParams
+
+    try:
+        RFCHParams.from_json(dict(table.data))
+    except (InputError, TypeError, ValueError) as exc:
+        key = str(exc).split(" ", 1)[0]  # RFCHParams names the parameter first
+        if key in table.data:
+            raise table.fail(key, str(exc)) from None
+        raise table._error(table.path, str(exc)) from None
+    table.used.update(table.data)
+    return dict(table.data)
+
+
 def _objects(table: _Table, folder: Path) -> tuple[ObjectConfig, ...]:
     if not table.data:
-        raise ConfigError(f"{table.source}: objects: name at least one object to find")
+        raise table._error("objects", "name at least one object to find")
     objects = []
     for name in list(table.data):
         entry = table.table(name)
@@ -321,3 +502,43 @@ def _objects(table: _Table, folder: Path) -> tuple[ObjectConfig, ...]:
         objects.append(ObjectConfig(name, model, body))
     table.finish()
     return tuple(objects)
+
+
+# -- writing -----------------------------------------------------------------------------------
+
+
+def dump_toml(data: dict[str, Any], comment: str = "") -> str:
+    """TOML text for a config's data (tables of strings, numbers, booleans and lists), so a
+    run's folder keeps the config it really ran with, ``--set`` overrides included."""
+    lines = [f"# {line}" if line else "#" for line in comment.splitlines()]
+    _dump_table(data, [], lines)
+    return "\n".join(lines).strip() + "\n"
+
+
+def _dump_table(table: dict[str, Any], path: list[str], lines: list[str]) -> None:
+    scalars = {k: v for k, v in table.items() if not isinstance(v, dict)}
+    tables = {k: v for k, v in table.items() if isinstance(v, dict)}
+    if path and (scalars or not tables):
+        lines += ["", f"[{'.'.join(_key(p) for p in path)}]"]
+    lines += [f"{_key(k)} = {_value(v)}" for k, v in scalars.items()]
+    for key, child in tables.items():
+        _dump_table(child, [*path, key], lines)
+
+
+def _key(key: str) -> str:
+    bare = key and all(c.isalnum() or c in "_-" for c in key)
+    return key if bare else _value(key)
+
+
+def _value(value: Any) -> str:
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, int | float):
+        if isinstance(value, float) and not math.isfinite(value):
+            return "nan" if math.isnan(value) else ("inf" if value > 0 else "-inf")
+        return repr(value)
+    if isinstance(value, str):
+        return json.dumps(value, ensure_ascii=False)  # JSON's string escapes are TOML's too
+    if isinstance(value, list):
+        return "[" + ", ".join(_value(v) for v in value) + "]"
+    raise ConfigError(f"cannot write {value!r} ({type(value).__name__}) as TOML")

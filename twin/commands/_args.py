@@ -37,3 +37,20 @@ def numbers(count: int, what: str) -> Callable[[str], tuple[float, ...]]:
         return values
 
     return parse
+
+
+def add_config_arguments(parser: argparse.ArgumentParser) -> None:
+    """--config and --set, for every command that runs a mission config."""
+    parser.add_argument(
+        "--config",
+        help="mission config: a TOML file, or the name of a shipped one (e.g. "
+        "living_room_serial_twins); default: the shipped living-room survey",
+    )
+    parser.add_argument(
+        "--set",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="override one config key; VALUE is TOML, e.g. --set grid.fusion=normalized "
+        "--set mission.views_per_stop=4 --set 'grid.extent=[0, 0, 4.5, 6]' (repeatable)",
+    )

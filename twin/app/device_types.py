@@ -1,0 +1,120 @@
+"""Every device type a config can name: its role, its typed options, and the factory that builds it.
+
+A config's ``[robot.<role>]`` table names a ``type``; the rest of the table is that type's
+options, declared here as a frozen dataclass (``twin.core.options``): name, type, unit, default
+and range, checked when the config is read, so a factory only ever sees typed values. The
+declarations are kept apart from the drivers so that reading a config never imports MuJoCo or
+pyserial; the factories (``twin.app.factory``) import a device's module only to build it.
+``twin devices`` prints this table for people.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Literal
+
+from twin.core.options import option
+
+ROLES = ("camera", "pantilt", "base")
+
+
+# -- the twin ----------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class SimCameraOptions:
+    """The head camera rendered by MuJoCo. Its vertical field of view is the MJCF camera's, so
+    the horizontal one follows from the aspect (320 x 240 gives the paper's 45 degrees)."""
+
+    width: int = option(320, unit="px", low=16, high=1920, doc="image width")
+    height: int = option(240, unit="px", low=16, high=1080, doc="image height")
+
+
+@dataclass(frozen=True)
+class SimPanTiltOptions:
+    """The head's servos, with the VC-C4's limits and speeds (models/peoplebot.xml)."""
+
+
+@dataclass(frozen=True)
+class SimBaseOptions:
+    """The differential-drive base, driven by its wheels through the physics."""
+
+    pose_source: Literal["odometry", "truth"] = option(
+        "odometry",
+        doc="what pose() reports: wheel odometry (as on the robot) or the ground truth",
+    )
+
+
+# -- the real robot ----------------------------------------------------------------------------
+
+SERIAL_PORT_DOC = 'serial port, e.g. /dev/ttyUSB0, or "twin" for the emulator on a pty'
+
+
+@dataclass(frozen=True)
+class OpenCVCameraOptions:
+    """A camera or capture card read through OpenCV (the VC-C4's video on the Peoplebot)."""
+
+    device: int | str = option(0, doc="camera index, device path, video file or stream URL")
+    width: int = option(320, unit="px", low=16, high=4096, doc="frame width delivered")
+    height: int = option(240, unit="px", low=16, high=4096, doc="frame height delivered")
+    hfov_deg: float = option(45.0, unit="deg", low=1.0, high=179.0, doc="horizontal field of view")
+    reconnect_attempts: int = option(3, low=0, high=100, doc="reopen tries after a lost camera")
+
+
+@dataclass(frozen=True)
+class VCC4Options:
+    """Canon VC-C4 pan-tilt head over RS-232, on its own port or tunnelled through ARCOS AUX."""
+
+    port: str | None = option(None, doc=SERIAL_PORT_DOC + ' (wiring = "direct")')
+    baud: Literal[9600] = option(9600, doc="the VC-C4 speaks 9600 8N1 only")
+    wiring: Literal["direct", "aux"] = option(
+        "direct", doc='"direct": its own serial port; "aux": through the base\'s AUX port'
+    )
+    aux_port: int = option(1, low=1, high=3, doc='the ARCOS AUX port (wiring = "aux")')
+
+
+@dataclass(frozen=True)
+class ArcosOptions:
+    """The Peoplebot's base over ARCOS on the onboard computer's serial port."""
+
+    port: str = option(doc=SERIAL_PORT_DOC)
+    baud: Literal[9600, 19200, 38400, 57600, 115200] = option(9600, doc="the HOST port's rate")
+
+
+@dataclass(frozen=True)
+class DeviceType:
+    """One ``type`` of one role: its options and its factory (``module:function``)."""
+
+    role: str
+    name: str
+    options: type
+    factory: str
+    summary: str
+
+
+DEVICE_TYPES: dict[tuple[str, str], DeviceType] = {
+    (t.role, t.name): t
+    for t in (
+        DeviceType("camera", "sim", SimCameraOptions, "twin.app.factory:sim_camera",
+                   "the head camera rendered in the MuJoCo twin"),
+        DeviceType("pantilt", "sim", SimPanTiltOptions, "twin.app.factory:sim_pantilt",
+                   "the head's servos in the MuJoCo twin"),
+        DeviceType("base", "sim", SimBaseOptions, "twin.app.factory:sim_base",
+                   "the differential-drive base in the MuJoCo twin"),
+        DeviceType("camera", "opencv", OpenCVCameraOptions, "twin.app.factory:opencv_camera",
+                   "a camera or capture card through OpenCV"),
+        DeviceType("pantilt", "vcc4", VCC4Options, "twin.app.factory:vcc4_pantilt",
+                   "Canon VC-C4 over RS-232"),
+        DeviceType("base", "arcos", ArcosOptions, "twin.app.factory:arcos_base",
+                   "Peoplebot base over ARCOS"),
+    )
+}  # fmt: skip
+
+
+def device_type(role: str, name: str) -> DeviceType:
+    """The declared type, or a ``KeyError`` (the config turns it into a one-line error)."""
+    return DEVICE_TYPES[(role, name)]
+
+
+def types_of(role: str) -> list[str]:
+    return sorted(name for r, name in DEVICE_TYPES if r == role)
