@@ -1,40 +1,36 @@
-"""The survey mission: planning, a reduced mission in the twin, resume, recording, bad configs."""
+"""The survey: its plan, one view in the Mission, a reduced mission in the twin, resume, run
+folders, signals."""
 
 import json
 import math
+import os
+import signal
+import subprocess
+import sys
+import time
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-from twin.app.config import ConfigError, MissionConfig, load_config
-from twin.app.survey import SurveyContext, plan_views, run_survey
+from twin.app.config import MissionConfig, load_config
+from twin.app.mission import Checkpoint, Mission, MissionState
+from twin.app.survey import plan_views, run_survey
 from twin.cli import main
 from twin.core.devices import VCC4_LIMITS, Base, Camera, Frame, PanTilt, Robot
-from twin.core.errors import InputError
+from twin.core.errors import TwinError
 from twin.core.geometry import CameraModel, Pose2D, wrap_angle
 from twin.core.grid import AccumulatorGrid, GridSpec
 
-SHIPPED = Path(__file__).resolve().parents[1] / "scenes" / "living_room_survey.toml"
-REDUCED_STOPS = "[[1.1, 1.2], [2.5, 3.3], [2.7, 4.4]]"  # 3 of the paper's 5 stops: 24 views
+REDUCED = "mission.stops=[[1.1, 1.2], [2.5, 3.3], [2.7, 4.4]]"  # 3 of the paper's 5 stops: 24 views
 
 
-def write_config(folder: Path, cache: Path, rerun: str = "off", **replace: str) -> Path:
-    """The shipped config with the reduced mission, a shared model cache and given keys replaced."""
-    lines = []
-    settings = {
-        "stops": REDUCED_STOPS,
-        "rerun": f'"{rerun}"',
-        "cache": f'"{cache}"',
-        "file": f'"{SHIPPED.parent / "living_room.xml"}"',
-        **replace,
-    }
-    for line in SHIPPED.read_text().splitlines():
-        key = line.split("=")[0].strip()
-        lines.append(f"{key} = {settings[key]}" if key in settings and "=" in line else line)
-    path = folder / "survey.toml"
-    path.write_text("\n".join(lines) + "\n")
-    return path
+def survey_argv(out: Path, cache: Path, *sets: str, rerun: str = "off") -> list[str]:
+    """``twin survey`` of the shipped config with the reduced mission and a shared model cache."""
+    argv = ["survey", "--out", str(out), "--quiet", "--set", REDUCED]
+    for setting in (f"run.cache={cache}", f"run.rerun={rerun}", *sets):
+        argv += ["--set", setting]
+    return argv
 
 
 @pytest.fixture(scope="session")
@@ -66,14 +62,16 @@ def test_pan_mode_covers_every_heading_with_two_base_turns_per_stop():
 
 def test_base_mode_faces_every_heading_with_the_head_straight():
     headings = tuple(math.radians(45 * i) for i in range(8))
-    plan = plan_views(MissionConfig((0.0, 0.0, 0.0), ((1.0, 1.0),), headings, "base"), VCC4_LIMITS)
+    mission = MissionConfig((0.0, 0.0, 0.0), ((1.0, 1.0),), headings, "base", math.radians(10))
+    plan = plan_views(mission, VCC4_LIMITS)
     assert [v.pan for v in plan] == [0.0] * 8
+    assert {v.tilt for v in plan} == {math.radians(10)}
     assert sorted(round(v.base.yaw % (2 * math.pi), 6) for v in plan) == sorted(
         round(h % (2 * math.pi), 6) for h in headings
     )
 
 
-# -- resume, exactly, on devices with exact poses -----------------------------------------------
+# -- one view, on stand-in devices with exact poses ----------------------------------------------
 
 
 class Switch:
@@ -173,41 +171,115 @@ class MeanDetector:
         return np.array([[8 * c, 8 * c + 8] for c in range(8)], dtype=float)
 
 
-def exact_context(out: Path, grid: AccumulatorGrid) -> SurveyContext:
+class Clocked(PoseCamera):
+    """A pose camera on a clock that starts at ``t0`` and runs 2 s per grab."""
+
+    def __init__(self, base, head, t0):
+        super().__init__(base, head)
+        self.t = t0
+
+    def now(self):
+        return self.t
+
+    def grab(self):
+        self.t += 2.0
+        return Frame(super().grab().image, self.t)
+
+
+MISSION = MissionConfig(
+    (0.5, 0.5, 0.0),
+    ((1.0, 1.0), (3.0, 1.5), (2.0, 3.0)),
+    tuple(math.radians(60 * i) for i in range(6)),
+)
+SPEC = GridSpec(0.0, 0.0, 4.0, 4.0, 0.1)
+
+
+class Recording:
+    """A recorder that remembers what it was given and when it was flushed."""
+
+    def __init__(self):
+        self.events = []
+
+    def begin(self, scene, grid, planned_views):
+        self.events.append(("begin", planned_views))
+
+    def log_view(self, record, grid):
+        self.events.append(("view", record.index, record.robot_time, len(record.path)))
+
+    def flush(self):
+        self.events.append(("flush",))
+
+    def end(self):
+        self.events.append(("end",))
+
+    def wait(self):
+        pass
+
+
+def exact_mission(out: Path | None, grid=None, state=None, t0=100.0, recorder=None) -> Mission:
     base, head = ExactBase(), ExactHead()
-    mission = MissionConfig(
-        (0.5, 0.5, 0.0),
-        ((1.0, 1.0), (3.0, 1.5), (2.0, 3.0)),
-        tuple(math.radians(60 * i) for i in range(6)),
-    )
-    return SurveyContext(
-        Robot(PoseCamera(base, head), head, base), MeanDetector(), grid, mission, out
+    robot = Robot(Clocked(base, head, t0), head, base)
+    return Mission(
+        robot,
+        MeanDetector(),
+        grid or AccumulatorGrid(["thing"], SPEC),
+        recorder=recorder,
+        checkpoint=Checkpoint(out) if out else None,
+        state=state,
     )
 
 
-def test_resume_after_an_interruption_gives_the_same_grid(tmp_path):
-    spec = GridSpec(0.0, 0.0, 4.0, 4.0, 0.1)
-    straight = exact_context(tmp_path / "straight", AccumulatorGrid(["thing"], spec))
+def test_a_view_is_fused_recorded_flushed_then_checkpointed(tmp_path):
+    recorder = Recording()
+    mission = exact_mission(tmp_path, recorder=recorder)
+    plan = plan_views(MISSION, VCC4_LIMITS)
+    with mission.robot:
+        record = mission.observe(plan[0])
+    assert record.index == 0 and record.view.pose == plan[0].base
+    assert record.robot_time == pytest.approx(2.0)  # the robot's clock since the mission began
+    assert recorder.events == [("view", 0, 2.0, 1), ("flush",)]
+    saved = AccumulatorGrid.load(tmp_path / "checkpoint" / "grid.npz")
+    np.testing.assert_array_equal(saved.layer("thing"), mission.grid.layer("thing"))
+    assert MissionState.read(tmp_path / "checkpoint" / "state.json").views_done == 1
+    assert mission.result()["views"] == 1
+
+
+def test_resume_after_an_interruption_gives_the_same_grid_and_continues_the_clock(tmp_path):
+    plan = plan_views(MISSION, VCC4_LIMITS)
+    straight = exact_mission(None)
     with straight.robot:
-        run_survey(straight)
+        run_survey(straight, plan)
 
-    interrupted = exact_context(tmp_path / "resumed", AccumulatorGrid(["thing"], spec))
+    interrupted = exact_mission(tmp_path)
 
     def stop_at_view_7(view):
         if view.index == 7:
             raise KeyboardInterrupt
 
     with pytest.raises(KeyboardInterrupt), interrupted.robot:
-        run_survey(interrupted, on_view=stop_at_view_7)
-    saved = AccumulatorGrid.load(tmp_path / "resumed" / "checkpoint" / "grid.npz")
-    assert saved.views("thing") == 7
-    resumed = exact_context(tmp_path / "resumed", saved)
+        run_survey(interrupted, plan, on_view=stop_at_view_7)
+    grid, state = Checkpoint(tmp_path).load(AccumulatorGrid(["thing"], SPEC))
+    assert grid.views("thing") == 7 and state.views_done == 7
+    assert state.robot_time == pytest.approx(14.0)
+    # A new session's clock starts anywhere (here at 5000 s): robot time continues from 14 s.
+    resumed = exact_mission(tmp_path, grid, state, t0=5000.0)
     with resumed.robot:
-        state = run_survey(resumed, resume=True)
-    assert state.views_done == 18 and len(state.path) == 18
-    assert resumed.grid.views("thing") == 18
+        run_survey(resumed, plan)
+    assert resumed.views_done == 18 and len(resumed.state.path) == 18
+    assert resumed.state.robot_time == pytest.approx(36.0)
     np.testing.assert_array_equal(resumed.grid.layer("thing"), straight.grid.layer("thing"))
     np.testing.assert_array_equal(resumed.grid.observed("thing"), straight.grid.observed("thing"))
+
+
+def test_a_mission_refuses_a_state_that_is_not_its_grids(tmp_path):
+    with pytest.raises(TwinError, match="state says 3 views but its grid holds 0"):
+        exact_mission(None, state=MissionState(views_done=3))
+    plan = plan_views(MISSION, VCC4_LIMITS)
+    mission = exact_mission(None)
+    with mission.robot:
+        run_survey(mission, plan)
+    with pytest.raises(TwinError, match="holds 18 views but its plan has 6"):
+        run_survey(mission, plan[:6])
 
 
 # -- the mission in the twin ------------------------------------------------------------------
@@ -215,22 +287,32 @@ def test_resume_after_an_interruption_gives_the_same_grid(tmp_path):
 
 @pytest.fixture(scope="module")
 def reduced_run(tmp_path_factory, model_cache):
-    folder = tmp_path_factory.mktemp("reduced")
-    config = write_config(folder, model_cache, rerun="save")
-    out = folder / "run"
-    assert main(["survey", "--config", str(config), "--out", str(out), "--quiet"]) == 0
+    out = tmp_path_factory.mktemp("reduced") / "run"
+    assert main(survey_argv(out, model_cache, rerun="save")) == 0
     return out
 
 
 def test_a_reduced_mission_finds_the_rice_box(reduced_run):
     result = read_result(reduced_run)
     box = result["objects"]["rice_box"]
-    assert result["views"] == 24
+    assert result["status"] == "complete"
+    assert result["views"] == result["views_planned"] == 24
     assert box["error_m"] < 0.2
     assert box["peak_ratio"] is None or box["peak_ratio"] > 1.1
-    assert set(result["timings_s"]) >= {"physics", "render", "detect", "fuse", "record", "total"}
+    assert set(result["timings_s"]) >= {"move", "capture", "detect", "fuse", "record", "total"}
+    assert result["robot_time_s"] > 0
     assert (reduced_run / "grid_rice_box.png").read_bytes()[:4] == b"\x89PNG"
     assert AccumulatorGrid.load(reduced_run / "grid.npz").views("rice_box") == 24
+
+
+def test_the_run_keeps_the_config_it_really_ran_with(reduced_run, model_cache):
+    config = load_config(reduced_run / "config.toml")
+    assert config.mission.stops == ((1.1, 1.2), (2.5, 3.3), (2.7, 4.4))
+    assert config.cache == model_cache
+    text = (reduced_run / "config.toml").read_text()
+    assert text.startswith("# The config this run used:") and "# with --set mission.stops" in text
+    options = json.loads((reduced_run / "run.json").read_text())
+    assert options["kind"] == "twin-survey-run" and REDUCED in options["overrides"]
 
 
 def test_the_recording_holds_the_expected_entities(reduced_run):
@@ -238,137 +320,143 @@ def test_the_recording_holds_the_expected_entities(reduced_run):
 
     store = RrdReader(reduced_run / "recording.rrd").store()
     entities = set(store.schema().entity_paths())
-    expected = {
-        "/world/room/outline",
-        "/world/room/furniture/chair",
-        "/world/truth/rice_box",
-        "/world/robot",
-        "/world/path",
-        "/world/robot/camera",
-        "/world/robot/camera/image",
-        "/world/robot/camera/image/scores/rice_box",
-        "/world/wedges/rice_box",
-        "/world/grid/rice_box",
-        "/world/estimate/rice_box",
-        "/plots/peak/rice_box",
-    }
-    assert expected <= entities
+    assert {"/world/robot", "/world/robot/camera/image"} <= entities
     archetypes = {str(a) for a in store.schema().archetypes()}
     assert any("GridMap" in a for a in archetypes) and any("Pinhole" in a for a in archetypes)
 
 
-def test_an_interrupted_survey_resumes_from_its_folder(
+def test_an_interrupted_survey_writes_its_results_and_resumes(
     tmp_path, model_cache, monkeypatch, reduced_run
 ):
-    import twin.app.run
-
-    config = write_config(tmp_path, model_cache, rerun="save")
     out = tmp_path / "run"
-    real = twin.app.run.run_survey
+    real = Mission.observe
 
-    def interrupted(context, on_view=None, resume=False):
-        def hook(view):
-            on_view(view)
-            if view.index == 10:
-                raise KeyboardInterrupt
+    def observe(self, target):
+        if self.views_done == 10:
+            raise KeyboardInterrupt
+        return real(self, target)
 
-        return real(context, on_view=hook, resume=resume)
-
-    monkeypatch.setattr(twin.app.run, "run_survey", interrupted)
-    assert main(["survey", "--config", str(config), "--out", str(out), "--quiet"]) == 130
-    assert not (out / "result.json").exists()
-    assert AccumulatorGrid.load(out / "checkpoint" / "grid.npz").views("rice_box") == 10
-    monkeypatch.setattr(twin.app.run, "run_survey", real)
+    monkeypatch.setattr(Mission, "observe", observe)
+    assert main(survey_argv(out, model_cache, rerun="save")) == 130
+    stopped = read_result(out)
+    assert stopped["status"] == "interrupted" and stopped["views"] == 10
+    assert stopped["views_planned"] == 24
+    assert AccumulatorGrid.load(out / "grid.npz").views("rice_box") == 10
+    monkeypatch.setattr(Mission, "observe", real)
     assert main(["survey", "--resume", str(out), "--quiet"]) == 0
     result = read_result(out)
-    assert result["views"] == 24
+    assert result["status"] == "complete" and result["views"] == 24
+    assert result["robot_time_s"] > stopped["robot_time_s"]  # the clock went on, not from 0
     assert (out / "recording-resumed-1.rrd").is_file()
     resumed = AccumulatorGrid.load(out / "grid.npz").layer("rice_box")
     straight = AccumulatorGrid.load(reduced_run / "grid.npz").layer("rice_box")
     # The resumed robot reaches each stop by another path, so poses differ by millimetres.
     assert np.corrcoef(resumed.ravel(), straight.ravel())[0, 1] > 0.99
     assert (
-        result["objects"]["rice_box"]["estimate_m"]
-        == read_result(reduced_run)["objects"]["rice_box"]["estimate_m"]
+        math.dist(
+            result["objects"]["rice_box"]["estimate_m"],
+            read_result(reduced_run)["objects"]["rice_box"]["estimate_m"],
+        )
+        <= 0.1 + 1e-9
     )
 
 
+def test_resuming_a_finished_run_changes_nothing(reduced_run, capsys):
+    before = {p: p.stat().st_mtime_ns for p in reduced_run.rglob("*")}
+    assert main(["survey", "--resume", str(reduced_run)]) == 0
+    assert "is a finished run (24 views); nothing to resume" in capsys.readouterr().out
+    assert {p: p.stat().st_mtime_ns for p in reduced_run.rglob("*")} == before
+
+
 def test_random_target_placement_moves_the_truth(tmp_path, model_cache):
-    config = write_config(tmp_path, model_cache, stops="[[2.5, 3.3]]", views_per_stop="2")
     out = tmp_path / "run"
-    argv = [
-        "survey",
-        "--config",
-        str(config),
-        "--out",
-        str(out),
-        "--quiet",
-        "--place-target",
-        "random",
-        "--seed",
-        "3",
-    ]
-    assert main(argv) == 0
+    argv = survey_argv(out, model_cache, "mission.stops=[[2.5, 3.3]]", "mission.views_per_stop=2")
+    assert main([*argv, "--place-target", "random", "--seed", "3"]) == 0
     truth = read_result(out)["objects"]["rice_box"]["truth_m"]
     assert math.dist(truth, (1.5, 5.0)) > 0.3
 
 
-# -- bad input --------------------------------------------------------------------------------
+# -- run folders --------------------------------------------------------------------------------
 
 
-@pytest.mark.parametrize(
-    ("replace", "match"),
-    [
-        ({"stops": "[[1.0]]"}, "mission.stops[0]: expected [x, y]"),
-        ({"stops": "[]"}, "mission.stops: expected a list"),
-        ({"cell_size": "-0.1"}, "grid.cell_size: expected a positive size"),
-        ({"extent": "[0.0, 0.0, 4.55, 6.0]"}, "grid.extent: grid extent along x"),
-        ({"fusion": '"bayes"'}, "grid.fusion: expected one of"),
-        ({"fusion": '"logodds"'}, "grid.p_fp: logodds needs"),
-        ({"views_per_stop": "0"}, "mission.views_per_stop: expected a whole number"),
-        ({"turn": '"spin"'}, "mission.turn: expected one of pan, base"),
-        ({"rerun": "stream"}, "run.rerun: expected one of"),
-        ({"pose_source": '"gps"'}, "sim base pose source 'gps'"),
-        ({"start": "[1.0, 2.0]"}, "mission.start: expected [x, y, yaw_deg]"),
-        ({"file": '"no_such_room.xml"'}, "scene.file: no scene file"),
-    ],
-)
-def test_bad_configs_are_one_line_errors_naming_the_key(
-    tmp_path, model_cache, capsys, replace, match
-):
-    config = write_config(tmp_path, model_cache, **replace)
-    code = main(["survey", "--config", str(config), "--out", str(tmp_path / "o"), "--quiet"])
+def one_line_error(capsys, argv: list[str]) -> str:
+    code = main(argv)
     err = capsys.readouterr().err.strip()
     assert code == 2, err
-    assert match in err and len(err.splitlines()) == 1
+    assert len(err.splitlines()) == 1, err
+    return err
 
 
-@pytest.mark.parametrize(
-    ("edit", "match"),
-    [
-        (("[mission]", "[mission]\nstopz = 1"), "mission.stopz: unknown key"),
-        (("[grid]", "[grid\n"), "not valid TOML"),
-    ],
-)
-def test_unknown_keys_and_broken_toml_are_named(tmp_path, model_cache, edit, match):
-    path = tmp_path / "bad.toml"
-    path.write_text(write_config(tmp_path, model_cache).read_text().replace(*edit))
-    with pytest.raises(ConfigError, match=match):
-        load_config(path)
+def test_an_unusable_out_is_one_line_and_creates_nothing(tmp_path, capsys):
+    a_file = tmp_path / "a_file"
+    a_file.write_text("mine")
+    cases = {
+        a_file: "is a file, not a folder",
+        a_file / "inside": "lies inside",
+        Path("/proc/no/such/run"): "cannot create the folder",
+    }
+    for out, message in cases.items():
+        assert message in one_line_error(capsys, ["survey", "--out", str(out), "--quiet"])
+    assert a_file.read_text() == "mine"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a_file"]
 
 
-def test_an_unknown_device_type_is_named_with_the_known_ones(tmp_path, model_cache):
-    from twin.app.factory import build_robot
+def test_a_folder_that_is_not_a_run_is_refused_never_overwritten(tmp_path, capsys):
+    theirs = tmp_path / "theirs"
+    theirs.mkdir()
+    (theirs / "result.json").write_text("someone else's")
+    err = one_line_error(capsys, ["survey", "--out", str(theirs), "--quiet"])
+    assert "holds files that are not a twin survey run (e.g. result.json)" in err
+    assert [p.name for p in theirs.iterdir()] == ["result.json"]
 
-    path = tmp_path / "bad.toml"
-    text = write_config(tmp_path, model_cache).read_text()
-    path.write_text(text.replace('type = "sim"', 'type = "warp"', 1))
-    with pytest.raises(InputError, match=r"robot\.camera\.type: unknown type 'warp'; use one of"):
-        build_robot(load_config(path))
+
+def test_a_run_folder_is_never_restarted_and_resume_needs_a_run(tmp_path, reduced_run, capsys):
+    assert "--resume" in one_line_error(capsys, ["survey", "--out", str(reduced_run), "--quiet"])
+    assert "holds no survey to resume" in one_line_error(
+        capsys, ["survey", "--resume", str(tmp_path)]
+    )
+    (tmp_path / "f").write_text("x")
+    assert "is a file" in one_line_error(capsys, ["survey", "--resume", str(tmp_path / "f")])
+    for content in ('{"kind": "twin-survey-run"}', "[1, 2]", "{torn"):
+        (tmp_path / "run.json").write_text(content)
+        err = one_line_error(capsys, ["survey", "--resume", str(tmp_path)])
+        assert "run.json" in err and "start a new run" in err
 
 
-def test_folders_are_never_overwritten_and_resume_needs_a_run(tmp_path, reduced_run, capsys):
-    assert main(["survey", "--out", str(reduced_run), "--quiet"]) == 2
-    assert "--resume" in capsys.readouterr().err
-    assert main(["survey", "--resume", str(tmp_path), "--quiet"]) == 2
-    assert "holds no survey to resume" in capsys.readouterr().err
+def test_a_false_start_leaves_no_folder_behind(tmp_path, capsys, model_cache):
+    out = tmp_path / "new" / "run"
+    argv = survey_argv(out, model_cache, "scene.file=no_such_room.xml")
+    assert "scene.file: no scene file" in one_line_error(capsys, argv)
+    assert not (tmp_path / "new").exists()
+
+
+# -- signals ------------------------------------------------------------------------------------
+
+
+def wait_for(path: Path, timeout: float = 120.0) -> None:
+    deadline = time.monotonic() + timeout
+    while not path.exists():
+        assert time.monotonic() < deadline, f"{path} never appeared"
+        time.sleep(0.05)
+
+
+@pytest.mark.parametrize(("signum", "code", "status"), [
+    (signal.SIGTERM, 143, "terminated"), (signal.SIGINT, 130, "interrupted"),
+])  # fmt: skip
+def test_a_signal_mid_run_writes_the_results_so_far_and_exits_cleanly(
+    tmp_path, model_cache, reduced_run, signum, code, status
+):
+    out = tmp_path / "run"
+    argv = survey_argv(out, model_cache)
+    process = subprocess.Popen(
+        [sys.executable, "-m", "twin.cli", *argv], stderr=subprocess.PIPE, text=True,
+        env={**os.environ, "MUJOCO_GL": "egl"},
+    )  # fmt: skip
+    wait_for(out / "checkpoint" / "grid.npz")
+    process.send_signal(signum)
+    _, err = process.communicate(timeout=120)
+    assert process.returncode == code, err
+    assert "Traceback" not in err and err.strip().splitlines()[-1].endswith(status)
+    result = read_result(out)
+    assert result["status"] == status and 1 <= result["views"] < 24
+    assert AccumulatorGrid.load(out / "grid.npz").views("rice_box") == result["views"]

@@ -1,7 +1,14 @@
-"""One survey run from its folder: build everything the config names, fly the mission, report.
+"""One mission run in its folder: build what the config names, fly the plan, write the results.
 
-``twin survey`` prepares the folder (a copy of the config and the run's options) and calls
-``run_mission``; a resumed run calls it again on the same folder.
+A run folder holds ``config.toml`` (the config the run really uses, ``--set`` overrides
+included), ``run.json`` (how it was started: ``RunOptions``), the checkpoint, and at the end
+``result.json``, ``grid.npz``, ``grid_<object>.png`` and the Rerun recording. ``twin survey``
+starts a run with ``start_run``; ``twin survey --resume DIR`` continues one with ``resume_run``;
+both fly it with ``run_mission``.
+
+An interrupted run (Ctrl-C, SIGTERM, a device error) still writes its results from the last
+checkpoint, with ``"status"`` saying why it stopped, and can be resumed; a finished run
+(``"status": "complete"``) is never run again.
 """
 
 from __future__ import annotations
@@ -9,114 +16,313 @@ from __future__ import annotations
 import json
 import sys
 import time
+import uuid
 from collections.abc import Callable
+from dataclasses import asdict, dataclass, field
+from datetime import datetime
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from twin.app.config import SurveyConfig, load_config
+from twin.app.config import RERUN_MODES, SurveyConfig, dump_toml, load_config, resolve_config
+from twin.app.mission import Checkpoint, Mission, MissionState
+from twin.app.outputs import check_output_folder, make_output_folder, removed_on_false_start
 from twin.app.plots import grid_figure
 from twin.app.record import NullRecorder, Recorder, RerunRecorder, SceneInfo
-from twin.app.survey import CHECKPOINT_GRID, SurveyContext, estimates, plan_views, run_survey
-from twin.core.errors import InputError, TwinError
+from twin.app.survey import plan_views, run_survey
+from twin.core.errors import InputError, Terminated, TwinError
 from twin.core.grid import AccumulatorGrid
 from twin.core.store import json_safe, write_text_atomic
 
 RESULT_FILE = "result.json"
 RECORDING_FILE = "recording.rrd"
+RUN_CONFIG = "config.toml"
+RUN_OPTIONS = "run.json"
+RUN_KIND = "twin-survey-run"
+PLACEMENTS = ("config", "random")
+
+
+@dataclass(frozen=True)
+class RunOptions:
+    """How a run was started (``run.json``): what a resume needs besides the config."""
+
+    config_source: str  # the config file it started from: relative paths in it resolve there
+    working_dir: str  # run.out and run.cache resolve here
+    place_target: str = "config"
+    seed: int = 0
+    rerun: str = "save"
+    rerun_bind: str = "127.0.0.1"
+    recording_id: str = field(default_factory=lambda: str(uuid.uuid4()))
+    overrides: tuple[str, ...] = ()  # the --set KEY=VALUE it started with (already in config.toml)
+
+    def to_json(self) -> str:
+        return json.dumps({"kind": RUN_KIND, **asdict(self)}, indent=1)
+
+    @classmethod
+    def read(cls, folder: Path) -> RunOptions:
+        """The options of the run in ``folder``; a one-line error if it holds none or they are
+        not what a run writes."""
+        path = folder / RUN_OPTIONS
+        try:
+            data = json.loads(path.read_text(encoding="utf-8"))
+        except FileNotFoundError:
+            raise InputError(
+                f"{folder} holds no survey to resume (no {RUN_OPTIONS}); check the folder"
+            ) from None
+        except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+            raise InputError(f"{path} is unreadable ({exc}); start a new run") from None
+        strings = ("config_source", "working_dir", "place_target", "rerun", "rerun_bind",
+                   "recording_id")  # fmt: skip
+        ok = isinstance(data, dict) and all(isinstance(data.get(k), str) for k in strings)
+        ok = ok and isinstance(data.get("seed"), int) and not isinstance(data.get("seed"), bool)
+        ok = ok and data.get("place_target") in PLACEMENTS and data.get("rerun") in RERUN_MODES
+        overrides = data.get("overrides", []) if isinstance(data, dict) else None
+        ok = ok and isinstance(overrides, list) and all(isinstance(o, str) for o in overrides)
+        if not ok:
+            raise InputError(
+                f"{path} is not the options of a twin survey run (wrong shape); start a new run"
+            )
+        return cls(
+            data["config_source"],
+            data["working_dir"],
+            data["place_target"],
+            data["seed"],
+            data["rerun"],
+            data["rerun_bind"],
+            data["recording_id"],
+            tuple(overrides),
+        )
+
+
+def is_run_folder(folder: Path) -> bool:
+    return (folder / RUN_OPTIONS).is_file()
+
+
+@dataclass(frozen=True)
+class PreparedRun:
+    """A run folder claimed and written, ready for ``run_mission``."""
+
+    folder: Path
+    options: RunOptions
+    created: list[Path]  # the folders made for it (removed again on a false start)
+
+
+def start_run(
+    config_name: str | Path | None,
+    overrides: tuple[str, ...],
+    out: Path | None,
+    place_target: str = "config",
+    seed: int = 0,
+    rerun: str | None = None,
+    rerun_bind: str = "127.0.0.1",
+) -> PreparedRun:
+    """Check everything that can be checked, then claim the run's folder and write its config
+    and options. ``out`` None: a new time-stamped folder below the config's ``run.out``."""
+    source = resolve_config(config_name)
+    config = load_config(source, overrides=overrides)
+    if place_target == "random" and not config.uses_sim_world:
+        raise InputError("--place-target random works in the simulation only")
+    if out is None:
+        stamp = datetime.now().strftime("%Y%m%d-%H%M%S")
+        out = config.out / stamp
+        suffix = 1
+        while out.exists():
+            suffix += 1
+            out = config.out / f"{stamp}-{suffix}"
+    flag = "--out"
+    if check_output_folder(out, flag, is_run_folder, "a twin survey run"):
+        raise InputError(
+            f"{out} holds a survey already; continue it with --resume {out}, "
+            "or choose another --out"
+        )
+    options = RunOptions(
+        str(source.resolve()),
+        str(Path.cwd()),
+        place_target,
+        seed,
+        rerun or config.rerun,
+        rerun_bind,
+        overrides=tuple(overrides),
+    )
+    created = make_output_folder(out, flag)
+    with removed_on_false_start(out, created, lambda: False):
+        comment = f"The config this run used: {source}"
+        if overrides:
+            comment += "\nwith --set " + " --set ".join(overrides)
+        write_text_atomic(out / RUN_CONFIG, dump_toml(config.data, comment))
+        write_text_atomic(out / RUN_OPTIONS, options.to_json())
+    return PreparedRun(out, options, created)
+
+
+def resume_run(folder: Path) -> PreparedRun | dict[str, Any]:
+    """The run in ``folder`` to continue, or its result if it is finished (nothing to do)."""
+    if not folder.exists():
+        raise InputError(f"--resume {folder}: no such folder; give a run's folder")
+    if not folder.is_dir():
+        raise InputError(f"--resume {folder}: is a file; give the run's folder")
+    options = RunOptions.read(folder)
+    result = read_result(folder)
+    if result is not None and result.get("status", "complete") == "complete":
+        return result
+    return PreparedRun(folder, options, [])
+
+
+def read_result(folder: Path) -> dict[str, Any] | None:
+    try:
+        data = json.loads((folder / RESULT_FILE).read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError):
+        return None
+    return data if isinstance(data, dict) else None
 
 
 def run_mission(
-    out: Path,
-    options: dict[str, Any],
+    run: PreparedRun,
     resume: bool,
     started: float,
     quiet: bool = False,
     on_result: Callable[[dict[str, Any]], None] | None = None,
 ) -> dict[str, Any]:
-    """Run or resume the survey in ``out``; returns (and writes) ``result.json``'s content.
+    """Fly (or continue) the run in ``run.folder``; returns and writes ``result.json``'s content.
 
-    ``on_result`` sees the result as soon as it is written, before a ``serve`` recorder keeps
-    serving viewers until Ctrl-C."""
-    from twin.app.factory import BuildContext, build_robot, uses_sim_world
+    A run that stops before its first view is checkpointed leaves no folder behind; one that
+    stops later writes its results so far and re-raises (the command exits 130 on Ctrl-C, 143
+    on SIGTERM, 2 on an error). ``on_result`` sees a finished run's result before a ``serve``
+    recorder keeps serving viewers until Ctrl-C."""
+    from twin.app.factory import BuildContext, build_robot
 
-    config = load_config(
-        out / "config.toml",
-        base_dir=Path(options["working_dir"]),
-        folder=Path(options["config_source"]).parent,
-    )
-    context = BuildContext(config)
-    if options.get("place_target") == "random":
-        if not uses_sim_world(config):
-            raise InputError("--place-target random works in the simulation only")
-        # Before any serial twin starts stepping the world: placing edits the model.
-        _place_target_randomly(config, context, int(options.get("seed", 0)))
-    robot, context = build_robot(config, context)
-    try:
-        return _fly(config, robot, context, out, options, resume, started, quiet, on_result)
-    finally:
-        context.close()
+    out, options = run.folder, run.options
+    checkpoint = Checkpoint(out)
+    with removed_on_false_start(out, run.created, checkpoint.grid_path.is_file):
+        config = load_config(
+            out / RUN_CONFIG,
+            base_dir=Path(options.working_dir),
+            folder=Path(options.config_source).parent,
+        )
+        context = BuildContext(config)
+        try:
+            if options.place_target == "random":
+                # Before any serial twin starts stepping the world: placing edits the model.
+                _place_target_randomly(config, context, options.seed)
+            robot, context = build_robot(config, context)
+            return _fly(config, robot, context, run, resume, started, quiet, on_result)
+        finally:
+            context.close()
 
 
-def _fly(config, robot, context, out, options, resume, started, quiet, on_result) -> dict[str, Any]:
+def _fly(config, robot, context, run, resume, started, quiet, on_result) -> dict[str, Any]:
     """The run proper, once the devices (and any serial twins) exist."""
-    from twin.app.detection import prepare_detector
-
-    setup_started = time.perf_counter()
-    truth = _truth(config, context)
-    scene = _scene_info(config, context, truth)
-    say = (lambda _: None) if quiet else print
-    detector = prepare_detector(config.objects, config.detector, config.cache, say)
-    grid = _grid(config, out, resume)
-    recorder = _recorder(out, options, resume)
-    plan = plan_views(config.mission, robot.pantilt.limits)
-    recorder.begin(scene, grid, len(plan))
-    setup_time = time.perf_counter() - setup_started
-
     from tqdm import tqdm
 
-    done = grid.views(grid.objects[0])
+    from twin.app.detection import prepare_detector
+
+    out, options = run.folder, run.options
+    setup_started = time.perf_counter()
+    sim = context.sim_in_use
+    truth = _truth(config, sim)
+    scene = _scene_info(config, sim, truth)
+    say = (lambda _: None) if quiet else print
+    detector = prepare_detector(config.objects, config.detector, config.cache, say)
+    names = [obj.name for obj in config.objects]
+    grid = AccumulatorGrid(names, config.grid.spec, config.grid.rule, config.grid.supersample)
+    checkpoint = Checkpoint(out)
+    state = MissionState()
+    if resume and (loaded := checkpoint.load(grid)) is not None:
+        grid, state = loaded
+    plan = plan_views(config.mission, robot.pantilt.limits)
+    recorder = _recorder(out, options, resume, say)
+    mission = Mission(
+        robot,
+        detector,
+        grid,
+        recorder=recorder,
+        checkpoint=checkpoint,
+        state=state,
+        max_range=config.grid.max_range,
+        truth=truth,
+        truth_pose=sim.truth_pose if sim is not None else None,
+    )
+    setup_time = time.perf_counter() - setup_started
+    n_stops = len(config.mission.stops)
     bar = tqdm(
         total=len(plan),
-        initial=done,
+        initial=mission.views_done,
         unit="view",
         desc="survey",
         disable=quiet or not sys.stderr.isatty(),
     )
-    n_stops = len(config.mission.stops)
 
-    def on_view(view) -> None:
+    def on_view(view) -> None:  # before each view: show the views done so far
+        bar.update(mission.views_done - bar.n)
         bar.set_description(f"stop {view.stop + 1}/{n_stops}")
-        if view.index > done:
-            bar.update()
 
-    survey = SurveyContext(
-        robot, detector, grid, config.mission, out, config.grid.max_range, recorder
-    )
+    status, stopped_by = "complete", None
     try:
+        recorder.begin(scene, grid, len(plan))
         with robot, bar:
-            state = run_survey(survey, on_view=on_view, resume=resume)
-            bar.update()
+            run_survey(mission, plan, on_view)
+            bar.update(mission.views_done - bar.n)
+    except (KeyboardInterrupt, TwinError) as exc:
+        stopped_by = exc
+        status = _status(exc)
     finally:
         recorder.end()
+    if stopped_by is not None:
+        if not checkpoint.grid_path.is_file():
+            raise stopped_by  # nothing fused yet: nothing to report
+        # The grid in memory may hold half a view: report what the checkpoint holds.
+        grid, state = checkpoint.load(grid) or (grid, state)
+        mission = Mission(
+            robot, detector, grid, state=state, truth=truth, max_range=config.grid.max_range
+        )
+    result = _write_results(
+        config, mission, scene, out, options, status, len(plan), setup_time, started
+    )
+    if stopped_by is not None:
+        raise stopped_by
+    if on_result is not None:
+        on_result(result)
+    recorder.wait()
+    return result
+
+
+def _status(exc: BaseException) -> str:
+    if isinstance(exc, Terminated):
+        return "terminated"
+    if isinstance(exc, KeyboardInterrupt):
+        return "interrupted"
+    return f"failed: {exc}"
+
+
+def _write_results(
+    config: SurveyConfig,
+    mission: Mission,
+    scene: SceneInfo,
+    out: Path,
+    options: RunOptions,
+    status: str,
+    views_planned: int,
+    setup_time: float,
+    started: float,
+) -> dict[str, Any]:
+    grid = mission.grid
     grid.save(out / "grid.npz")
+    result = mission.result(config.grid.peak_separation)
     result = {
-        "objects": estimates(
-            grid, {k: v[:2] for k, v in truth.items()}, config.grid.peak_separation
-        ),
-        "views": state.views_done,
+        "status": status,
+        **result,
+        "views_planned": views_planned,
         "timings_s": {
-            **{k: round(v, 3) for k, v in state.timings.items() if k != "total"},
+            **result["timings_s"],
             "setup": round(setup_time, 3),
-            "total": round(time.perf_counter() - started, 3),
+            "session": round(time.perf_counter() - started, 3),
         },
         "grid": {
             "extent_m": list(scene.extent),
             "cell_size_m": grid.spec.cell_size,
             "fusion": grid.rule.name,
         },
-        "target_placement": options.get("place_target", "config"),
+        "target_placement": options.place_target,
     }
     for name in grid.objects:
         entry = result["objects"][name]
@@ -124,15 +330,12 @@ def _fly(config, robot, context, out, options, resume, started, quiet, on_result
             out / f"grid_{name}.png",
             grid.layer(name),
             scene.extent,
-            f"{name}: accumulator grid after {state.views_done} views",
-            [(f.name, f.polygon) for f in scene.furniture if f.name not in truth],
+            f"{name}: accumulator grid after {mission.views_done} views",
+            [(f.name, f.polygon) for f in scene.furniture if f.name not in mission.truth],
             estimate=tuple(entry["estimate_m"]),
             truth=tuple(entry["truth_m"]) if "truth_m" in entry else None,
         )
     write_text_atomic(out / RESULT_FILE, json.dumps(json_safe(result), indent=1))
-    if on_result is not None:
-        on_result(result)
-    recorder.wait()
     return result
 
 
@@ -145,41 +348,28 @@ def _place_target_randomly(config: SurveyConfig, context, seed: int) -> None:
             random_surface_pose(context.sim.world, obj.body, rng)
 
 
-def _truth(config: SurveyConfig, context) -> dict[str, tuple[float, float, float]]:
+def _truth(config: SurveyConfig, sim) -> dict[str, tuple[float, float, float]]:
     """Where the objects are (simulation only: the real robot has no ground truth)."""
-    if context._sim is None:
+    if sim is None:
         return {}
-    world = context.sim.world
     return {
-        obj.name: tuple(float(v) for v in world.body_position(obj.body))
+        obj.name: tuple(float(v) for v in sim.world.body_position(obj.body))
         for obj in config.objects
         if obj.body is not None
     }
 
 
-def _scene_info(config: SurveyConfig, context, truth) -> SceneInfo:
+def _scene_info(config: SurveyConfig, sim, truth) -> SceneInfo:
     """The room's outline and furniture from the scene file (the map, on the real robot too)."""
     from twin.sim import World
 
-    world = context.sim.world if context._sim is not None else World(config.scene)
+    world = sim.world if sim is not None else World(config.scene)
     furniture = tuple(world.footprints()[name] for name in world.furniture())
     return SceneInfo(world.room_bounds(), furniture, dict(truth))
 
 
-def _grid(config: SurveyConfig, out: Path, resume: bool) -> AccumulatorGrid:
-    names = [obj.name for obj in config.objects]
-    checkpoint = out / CHECKPOINT_GRID
-    if resume and checkpoint.is_file():
-        grid = AccumulatorGrid.load(checkpoint)
-        if list(grid.objects) != names or grid.spec != config.grid.spec:
-            raise TwinError(f"{checkpoint} does not match the run's config; start a new run")
-        return grid
-    return AccumulatorGrid(names, config.grid.spec, config.grid.rule, config.grid.supersample)
-
-
-def _recorder(out: Path, options: dict[str, Any], resume: bool) -> Recorder:
-    mode = options.get("rerun", "save")
-    if mode == "off":
+def _recorder(out: Path, options: RunOptions, resume: bool, say) -> Recorder:
+    if options.rerun == "off":
         return NullRecorder()
     path = out / RECORDING_FILE
     if resume and path.exists():
@@ -188,8 +378,5 @@ def _recorder(out: Path, options: dict[str, Any], resume: bool) -> Recorder:
             k += 1
         path = out / f"recording-resumed-{k}.rrd"
     return RerunRecorder(
-        mode,
-        path,
-        bind=options.get("rerun_bind", "127.0.0.1"),
-        recording_id=options.get("recording_id"),
+        options.rerun, path, bind=options.rerun_bind, recording_id=options.recording_id
     )

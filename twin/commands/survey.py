@@ -1,23 +1,18 @@
 """``twin survey``: the paper's mission end to end — the project's main job.
 
 A fresh run writes into a new time-stamped folder (below ``run.out``, or ``--out DIR``
-exactly); the config it ran with is copied there, so ``twin survey --resume DIR`` continues
-exactly that run after an interruption.
+exactly); the config it really runs with (``--set`` overrides included) is written there, so
+``twin survey --resume DIR`` continues exactly that run after an interruption.
 """
 
 from __future__ import annotations
 
 import argparse
-import json
 import math
-import sys
 import time
-import uuid
-from datetime import datetime
 from pathlib import Path
 
-RUN_CONFIG = "config.toml"
-RUN_OPTIONS = "run.json"
+from twin.commands._args import add_config_arguments
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -28,7 +23,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "fuse the bearing wedges into the accumulator grid; write result.json, grid PNGs and a "
         "Rerun recording. Without --config, runs the shipped living-room mission in the twin.",
     )
-    parser.add_argument("--config", type=Path, help="survey config (TOML); default: shipped")
+    add_config_arguments(parser)
     parser.add_argument("--out", type=Path, help="output folder (default: a new one in run.out)")
     parser.add_argument("--resume", type=Path, metavar="DIR", help="continue the run in DIR")
     parser.add_argument(
@@ -53,81 +48,45 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from twin.app.run import resume_run, run_mission, start_run
     from twin.core.errors import InputError
 
     started = time.perf_counter()
     if args.resume is not None:
-        if args.config is not None or args.out is not None:
+        if args.config is not None or args.out is not None or args.set:
             raise InputError(
                 "--resume DIR continues a run with its own config and folder; "
-                "drop --config and --out"
+                "drop --config, --set and --out"
             )
-        out, options = _resume_options(args.resume)
+        prepared = resume_run(args.resume)
+        if isinstance(prepared, dict):
+            print(
+                f"{args.resume} is a finished run ({prepared.get('views', '?')} views); "
+                "nothing to resume, nothing changed. Start a new run to survey again."
+            )
+            return 0
     else:
-        out, options = _fresh_options(args)
-    from twin.app.run import run_mission
-
+        prepared = start_run(
+            args.config,
+            tuple(args.set),
+            args.out,
+            args.place_target,
+            args.seed,
+            args.rerun,
+            args.rerun_bind,
+        )
+    out = prepared.folder
     run_mission(
-        out,
-        options,
+        prepared,
         resume=args.resume is not None,
         started=started,
         quiet=args.quiet,
-        on_result=None if args.quiet else lambda result: _print_summary(out, result),
+        on_result=None if args.quiet else lambda result: print_summary(out, result),
     )
     return 0
 
 
-def _fresh_options(args: argparse.Namespace) -> tuple[Path, dict]:
-    from twin.app.config import default_config_path, load_config
-    from twin.core.errors import InputError
-    from twin.core.store import write_text_atomic
-
-    source = args.config or default_config_path()
-    config = load_config(source)
-    if args.out is not None:
-        out = args.out
-        if (out / RUN_OPTIONS).exists():
-            raise InputError(
-                f"{out} holds a survey already; continue it with --resume {out}, "
-                "or choose another --out"
-            )
-    else:
-        stamp = datetime.now().strftime("%Y%m%d-%H%M%S")
-        out = config.out / stamp
-        suffix = 1
-        while out.exists():
-            suffix += 1
-            out = config.out / f"{stamp}-{suffix}"
-    options = {
-        "config_source": str(Path(source).resolve()),
-        "place_target": args.place_target,
-        "seed": args.seed,
-        "rerun": args.rerun or config.rerun,
-        "rerun_bind": args.rerun_bind,
-        "working_dir": str(Path.cwd()),
-        "recording_id": str(uuid.uuid4()),  # a resumed run's recording joins this one
-    }
-    write_text_atomic(out / RUN_CONFIG, Path(source).read_text(encoding="utf-8"))
-    write_text_atomic(out / RUN_OPTIONS, json.dumps(options, indent=1))
-    return out, options
-
-
-def _resume_options(folder: Path) -> tuple[Path, dict]:
-    from twin.core.errors import InputError
-
-    try:
-        options = json.loads((folder / RUN_OPTIONS).read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise InputError(
-            f"{folder} holds no survey to resume (no {RUN_OPTIONS}); check the folder"
-        ) from None
-    except json.JSONDecodeError as exc:
-        raise InputError(f"{folder / RUN_OPTIONS} is corrupt ({exc}); start a new run") from None
-    return folder, options
-
-
-def _print_summary(out: Path, result: dict) -> None:
+def print_summary(out: Path, result: dict) -> None:
     for name, entry in result["objects"].items():
         x, y = entry["estimate_m"]
         line = f"{name}: estimate ({x:.2f}, {y:.2f}) m, peak {entry['peak']:.2f}"
@@ -139,4 +98,4 @@ def _print_summary(out: Path, result: dict) -> None:
         print(line)
     timings = result["timings_s"]
     print("time (s): " + ", ".join(f"{k} {v:.1f}" for k, v in timings.items() if not math.isnan(v)))
-    print(f"wrote {out}", file=sys.stdout)
+    print(f"wrote {out}")

@@ -15,3 +15,8 @@ class InputError(TwinError, ValueError):
 
 class FileFormatError(TwinError):
     """A saved file is corrupt, of another kind, or of an unsupported format version."""
+
+
+class Terminated(KeyboardInterrupt):
+    """The process was asked to stop (SIGTERM). Raised in the main thread by the command line's
+    handler, so that it unwinds exactly as Ctrl-C does: results written, devices stopped."""

@@ -1,0 +1,276 @@
+"""One mission run: the single place where a view happens.
+
+A ``Mission`` owns what one run works with (the robot's devices, the detector, the grid, the
+recorder, the checkpoint and the timings) and ``observe(target)`` does one view end to end:
+move the base and the head, capture, score every patch, turn each patch column into a bearing
+wedge from the pose the view was taken at, fuse the wedges into every object's layer, record,
+checkpoint. The paper's fixed survey (``twin.app.survey``), the batch (``twin.app.batch``) and
+later planners only choose targets; none of them repeats this body.
+
+After every view the recording is flushed and then the grid and the mission's state are saved
+atomically, in that order: what the grid checkpoint holds the recording holds, and the grid's
+own view count is what a resumed mission trusts, so an interruption at any moment neither loses
+nor double-counts a view. The robot's clock (``robot_time``) continues across a resume.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import time
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Protocol
+
+import numpy as np
+
+from twin.app.record import NullRecorder, Recorder, ViewRecord
+from twin.core.devices import Robot
+from twin.core.errors import TwinError
+from twin.core.geometry import Pose2D
+from twin.core.grid import AccumulatorGrid
+from twin.core.store import write_text_atomic
+
+CHECKPOINT_GRID = "checkpoint/grid.npz"
+CHECKPOINT_STATE = "checkpoint/state.json"
+# Where a view's time goes: driving and panning (the physics, in the twin), taking the frame
+# (rendering), scoring and projecting, fusing, recording, saving the checkpoint.
+TIMING_KEYS = ("move", "capture", "detect", "fuse", "record", "checkpoint", "total")
+
+
+class PatchDetector(Protocol):
+    """What a mission needs from a detector (``twin.rfch.Detector`` is one)."""
+
+    @property
+    def names(self) -> list[str]: ...
+
+    def scores(self, image: np.ndarray) -> np.ndarray:
+        """(objects, rows, cols) patch scores in [0, 1] of one H x W x 3 RGB frame."""
+        ...
+
+    def patch_boxes(self, shape: tuple[int, ...]) -> np.ndarray: ...
+
+    def column_spans(self, width: int) -> np.ndarray: ...
+
+
+class ViewTarget(Protocol):
+    """Where one view is taken from: the base's pose (map frame), the head's pan and tilt
+    (radians, pan positive left), and the stop of a plan it belongs to (for progress)."""
+
+    @property
+    def stop(self) -> int: ...
+
+    @property
+    def base(self) -> Pose2D: ...
+
+    @property
+    def pan(self) -> float: ...
+
+    @property
+    def tilt(self) -> float: ...
+
+
+@dataclass
+class MissionState:
+    """What a mission has done besides the grid: saved beside it after every view."""
+
+    views_done: int = 0
+    path: list[list[float]] = field(default_factory=list)  # [x, y, yaw] per view
+    timings: dict[str, float] = field(default_factory=lambda: dict.fromkeys(TIMING_KEYS, 0.0))
+    robot_time: float = 0.0  # seconds on the robot's clock at the last view, across resumes
+
+    def to_json(self) -> str:
+        return json.dumps(
+            {
+                "views_done": self.views_done,
+                "path": self.path,
+                "timings_s": self.timings,
+                "robot_time_s": self.robot_time,
+            },
+            indent=1,
+        )
+
+    @classmethod
+    def read(cls, path: Path) -> MissionState:
+        """The saved state, or a fresh one if there is none or it is unreadable: these are
+        progress notes, the grid holds what counts."""
+        if not path.is_file():
+            return cls()
+        try:
+            data = json.loads(path.read_text(encoding="utf-8"))
+            timings = {k: float(data["timings_s"].get(k, 0.0)) for k in TIMING_KEYS}
+            robot_time = float(data.get("robot_time_s", 0.0))
+            return cls(int(data["views_done"]), list(data["path"]), timings, robot_time)
+        except (ValueError, KeyError, TypeError, AttributeError):
+            return cls()
+
+
+class Checkpoint:
+    """A mission's checkpoint in its run folder: the grid and the state, written atomically."""
+
+    def __init__(self, folder: Path) -> None:
+        self.grid_path = folder / CHECKPOINT_GRID
+        self.state_path = folder / CHECKPOINT_STATE
+
+    def load(self, grid: AccumulatorGrid) -> tuple[AccumulatorGrid, MissionState] | None:
+        """The saved grid and state, checked against a grid made from the run's config; ``None``
+        if nothing was saved yet."""
+        if not self.grid_path.is_file():
+            return None
+        saved = AccumulatorGrid.load(self.grid_path)
+        if list(saved.objects) != list(grid.objects) or saved.spec != grid.spec:
+            raise TwinError(
+                f"{self.grid_path} does not match the run's config (objects or grid extent "
+                "differ); start a new run"
+            )
+        state = MissionState.read(self.state_path)
+        done = saved.views(saved.objects[0])
+        state.views_done = done
+        del state.path[done:]
+        return saved, state
+
+    def save(self, grid: AccumulatorGrid, state: MissionState) -> None:
+        grid.save(self.grid_path)
+        write_text_atomic(self.state_path, state.to_json())
+
+
+class Mission:
+    """One run of the robot: ``observe`` a target, as many times as a planner likes, then read
+    ``result``. The robot must be connected while views are observed.
+
+    ``truth`` (simulation only) maps objects to their true (x, y, z) in metres and
+    ``truth_pose`` reads the base's true pose: both only annotate results and recordings, the
+    estimate never sees them. ``state`` continues a resumed mission (``Checkpoint.load``).
+    """
+
+    def __init__(
+        self,
+        robot: Robot,
+        detector: PatchDetector,
+        grid: AccumulatorGrid,
+        *,
+        recorder: Recorder | None = None,
+        checkpoint: Checkpoint | None = None,
+        state: MissionState | None = None,
+        max_range: float | None = None,
+        camera_height: float = 1.0,
+        truth: dict[str, tuple[float, float, float]] | None = None,
+        truth_pose: Callable[[], Pose2D] | None = None,
+    ) -> None:
+        names = list(detector.names)
+        if sorted(names) != sorted(grid.objects):
+            raise TwinError(f"the detector finds {names} but the grid holds {list(grid.objects)}")
+        self.robot, self.detector, self.grid = robot, detector, grid
+        self.recorder = recorder or NullRecorder()
+        self.checkpoint = checkpoint
+        self.state = state or MissionState()
+        if self.state.views_done != grid.views(grid.objects[0]):
+            raise TwinError(
+                f"the mission's state says {self.state.views_done} views but its grid holds "
+                f"{grid.views(grid.objects[0])}; resume from the run's own checkpoint"
+            )
+        self.max_range, self.camera_height = max_range, camera_height
+        self.truth = dict(truth or {})
+        self.truth_pose = truth_pose
+        self._names = names
+        # Robot time continues across resumes: this session's clock starts where the last
+        # session's last view left it.
+        self._clock_origin = robot.camera.now() - self.state.robot_time
+
+    @property
+    def views_done(self) -> int:
+        return self.state.views_done
+
+    @contextmanager
+    def _timed(self, key: str) -> Iterator[None]:
+        tick = time.perf_counter()
+        try:
+            yield
+        finally:
+            self.state.timings[key] += time.perf_counter() - tick
+
+    def observe(self, target: ViewTarget) -> ViewRecord:
+        """Take one view from ``target`` and fuse it; returns what the view was."""
+        started = time.perf_counter()
+        robot, state = self.robot, self.state
+        with self._timed("move"):
+            robot.base.go_to(target.base)
+            robot.pantilt.move_to(target.pan, target.tilt)
+        with self._timed("capture"):
+            view = robot.capture()
+            truth_pose = self.truth_pose() if self.truth_pose else None
+        with self._timed("detect"):
+            scores = self.detector.scores(view.image)
+            values = scores.max(axis=1)  # a column's match: its best patch
+            camera = robot.camera.model
+            spans = self.detector.column_spans(view.image.shape[1])
+            wedges = camera.wedges(view.pose, view.pan, spans)
+        with self._timed("fuse"):
+            per_object = {name: values[i] for i, name in enumerate(self._names)}
+            self.grid.fuse_all((view.pose.x, view.pose.y), wedges, per_object, self.max_range)
+        index = state.views_done
+        state.views_done += 1
+        state.path.append([view.pose.x, view.pose.y, view.pose.yaw])
+        state.robot_time = view.timestamp - self._clock_origin
+        record = ViewRecord(
+            index,
+            target.stop,
+            view,
+            state.robot_time,
+            camera,
+            self.camera_height,
+            self.detector.patch_boxes(view.image.shape),
+            {name: scores[i] for i, name in enumerate(self._names)},
+            wedges,
+            per_object,
+            tuple((x, y, yaw) for x, y, yaw in state.path),
+            truth_pose,
+        )
+        with self._timed("record"):
+            self.recorder.log_view(record, self.grid)
+            self.recorder.flush()
+        if self.checkpoint is not None:
+            with self._timed("checkpoint"):
+                self.checkpoint.save(self.grid, state)
+        state.timings["total"] += time.perf_counter() - started
+        return record
+
+    def result(self, peak_separation: float = 0.5) -> dict[str, Any]:
+        """Per object the estimate (and, in the sim, the truth and the error), the views fused,
+        the robot time and where the time went (seconds)."""
+        truth = {name: xyz[:2] for name, xyz in self.truth.items()}
+        return {
+            "objects": estimates(self.grid, truth, peak_separation),
+            "views": self.state.views_done,
+            "robot_time_s": round(self.state.robot_time, 3),
+            "timings_s": {k: round(v, 3) for k, v in self.state.timings.items()},
+        }
+
+
+def estimates(
+    grid: AccumulatorGrid,
+    truth: dict[str, tuple[float, float]] | None = None,
+    min_separation: float = 0.5,
+) -> dict[str, dict[str, Any]]:
+    """Per object: the best peak in metres, its value, the first/second peak ratio, and, when
+    the truth is known (simulation), the truth and the estimate's error in metres."""
+    out: dict[str, dict[str, Any]] = {}
+    for name in grid.objects:
+        peaks = grid.peaks(name, k=3, min_separation=min_separation)
+        best = peaks.best
+        entry: dict[str, Any] = {
+            "estimate_m": [round(best.x, 4), round(best.y, 4)],
+            "peak": best.value,
+            "peak_ratio": peaks.ratio if math.isfinite(peaks.ratio) else None,
+            "peaks": [
+                {"xy_m": [round(p.x, 4), round(p.y, 4)], "value": p.value} for p in peaks.peaks
+            ],
+        }
+        if truth and name in truth:
+            tx, ty = truth[name]
+            entry["truth_m"] = [round(tx, 4), round(ty, 4)]
+            entry["error_m"] = round(math.hypot(best.x - tx, best.y - ty), 4)
+        out[name] = entry
+    return out
