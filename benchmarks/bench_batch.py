@@ -15,7 +15,6 @@ import json
 import tempfile
 from pathlib import Path
 
-from twin.app.config import default_config_path
 from twin.cli import main as twin_main
 
 DETERMINISTIC = ("run", "lighting", "threshold", "objects", "views")
@@ -34,19 +33,12 @@ def main() -> None:
     args = parser.parse_args()
     with tempfile.TemporaryDirectory() as name:
         folder = Path(name)
-        text = default_config_path().read_text()
-        text = text.replace(
-            'file = "living_room.xml"',
-            f'file = "{default_config_path().parent / "living_room.xml"}"',
-        )
-        text = text.replace('cache = "runs/cache"', f'cache = "{folder / "cache"}"')
-        config = folder / "survey.toml"
-        config.write_text(text)
         results = {}
         for executor in ("local", "ray"):
             out = folder / executor
             argv = ["batch-survey", "--runs", str(args.runs), "--seed", str(args.seed),
-                    "--config", str(config), "--out", str(out), "--workers", str(args.workers),
+                    "--set", f"run.cache={folder / 'cache'}", "--out", str(out),
+                    "--workers", str(args.workers),
                     "--executor", executor, "--quiet"]  # fmt: skip
             if twin_main(argv) != 0:
                 raise SystemExit(f"batch-survey on {executor} failed")

@@ -7,48 +7,36 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from twin.app import executors
 from twin.app.batch import (
-    _WORLDS,
     BatchSpec,
+    MissionDraw,
     MissionWorld,
     ThresholdedDetector,
     draw_mission,
-    run_mission,
+    run_batch_mission,
 )
 from twin.cli import main
 from twin.core.errors import InputError
 
-SHIPPED = Path(__file__).resolve().parents[1] / "scenes" / "living_room_survey.toml"
 DETERMINISTIC = ("run", "lighting", "threshold", "objects", "views")
-
-
-def tiny_config(folder: Path, cache: Path) -> Path:
-    """The shipped mission cut to 1 stop x 2 views, no recording, a shared model cache."""
-    replace = {
-        "stops": "[[2.5, 3.3]]",
-        "views_per_stop": "2",
-        "rerun": '"off"',
-        "cache": f'"{cache}"',
-        "file": f'"{SHIPPED.parent / "living_room.xml"}"',
-    }
-    lines = []
-    for line in SHIPPED.read_text().splitlines():
-        key = line.split("=")[0].strip()
-        lines.append(f"{key} = {replace[key]}" if key in replace and "=" in line else line)
-    path = folder / "tiny.toml"
-    path.write_text("\n".join(lines) + "\n")
-    return path
 
 
 @pytest.fixture(scope="module")
 def tiny(tmp_path_factory):
-    folder = tmp_path_factory.mktemp("batch")
-    return tiny_config(folder, folder / "cache")
+    """The shipped mission cut to 1 stop x 2 views, no recording, a shared model cache: the
+    --set overrides every batch here runs with."""
+    cache = tmp_path_factory.mktemp("batch") / "cache"
+    return ("mission.stops=[[2.5, 3.3]]", "mission.views_per_stop=2", "run.rerun=off",
+            f"run.cache={cache}")  # fmt: skip
 
 
-def spec_for(config: Path, seed: int, **kwargs) -> BatchSpec:
-    return BatchSpec(config.read_text(), config.name, str(config.parent), str(Path.cwd()),
-                     seed, **kwargs)  # fmt: skip
+def set_args(sets) -> list[str]:
+    return [arg for setting in sets for arg in ("--set", setting)]
+
+
+def spec_for(sets, seed: int, **kwargs) -> BatchSpec:
+    return BatchSpec.from_config(None, sets, seed=seed, **kwargs)
 
 
 def runs(out: Path) -> dict[int, dict]:
@@ -69,7 +57,7 @@ def deterministic(result: dict) -> dict:
 @pytest.fixture(scope="module")
 def batch_run(tiny, tmp_path_factory):
     out = tmp_path_factory.mktemp("batch-out") / "b"
-    argv = ["batch-survey", "--runs", "2", "--seed", "4", "--config", str(tiny), "--out",
+    argv = ["batch-survey", "--runs", "2", "--seed", "4", *set_args(tiny), "--out",
             str(out), "--workers", "1", "--quiet"]  # fmt: skip
     assert main(argv) == 0
     return out, argv
@@ -117,8 +105,8 @@ def test_a_reused_world_gives_the_same_mission_as_a_fresh_one(batch_run, tiny):
     spec = spec_for(tiny, 4)
     reused = runs(out)[1]
     assert reused["reused_world"]  # run 1 ran in the world run 0 left behind
-    _WORLDS.clear()
-    fresh = run_mission(spec, 1)
+    executors._KEPT.clear()  # a worker that has not run a mission of this batch yet
+    fresh = run_batch_mission(spec, 1)
     assert not fresh["reused_world"]
     assert deterministic(fresh) == deterministic(reused)
 
@@ -147,7 +135,7 @@ def test_lighting_scales_the_rendered_image(tiny):
     try:
         means = []
         for scale in (0.5, 1.5):
-            world.reset(spec, draw_mission(spec, 0).__class__(0, scale, 0.0, False))
+            world.reset(spec, MissionDraw(0, scale, 0.0, False))
             means.append(float(world.robot.capture().image.mean()))
         assert means[1] > means[0] + 20  # out of 255
     finally:
@@ -174,16 +162,21 @@ def test_the_threshold_zeroes_patch_scores_below_it():
      (["--runs", "0"], "--runs must be at least 1")],
 )  # fmt: skip
 def test_bad_batch_input_is_one_line(tmp_path, capsys, tiny, argv, match):
-    code = main(["batch-survey", "--config", str(tiny), "--out", str(tmp_path / "x"), *argv])
+    code = main(["batch-survey", *set_args(tiny), "--out", str(tmp_path / "x"), *argv])
     err = capsys.readouterr().err.strip()
     assert code == 2
     assert match in err and len(err.splitlines()) == 1
 
 
-def test_a_spec_rejects_a_hardware_config(tmp_path):
-    sim_camera = 'type = "sim"\n\n[robot.pantilt]'
-    text = SHIPPED.read_text().replace(sim_camera, sim_camera.replace("sim", "vcc4", 1))
-    config = tmp_path / "hw.toml"
-    config.write_text(text)
+def test_a_spec_rejects_a_hardware_config(tiny):
     with pytest.raises(InputError, match="simulation only"):
-        spec_for(config, 0).load()
+        spec_for((*tiny, "robot.camera.type=opencv"), 0)
+
+
+def test_a_batch_out_that_is_not_a_batch_is_refused(tmp_path, tiny, capsys):
+    (tmp_path / "notes.txt").write_text("mine")
+    code = main(["batch-survey", *set_args(tiny), "--out", str(tmp_path), "--quiet"])
+    err = capsys.readouterr().err.strip()
+    assert code == 2 and len(err.splitlines()) == 1
+    assert "holds files that are not a twin batch-survey (e.g. notes.txt)" in err
+    assert [p.name for p in tmp_path.iterdir()] == ["notes.txt"]

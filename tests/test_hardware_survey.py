@@ -11,28 +11,7 @@ import pytest
 
 from twin.cli import main
 
-TWINS = Path(__file__).resolve().parents[1] / "scenes" / "living_room_serial_twins.toml"
-REDUCED_STOPS = "[[1.1, 1.2], [2.5, 3.3], [2.7, 4.4]]"
-
-
-def reduced(config: Path, folder: Path, cache: Path, time_scale: float | None) -> Path:
-    """``config`` with the reduced mission, no recording, a shared cache and a given pace."""
-    text = config.read_text()
-    text = text.replace('rerun = "save"', 'rerun = "off"')
-    text = text.replace('cache = "runs/cache"', f'cache = "{cache}"')
-    text = text.replace('file = "living_room.xml"', f'file = "{config.parent / "living_room.xml"}"')
-    lines = [
-        f"stops = {REDUCED_STOPS}" if line.startswith("stops =") else line
-        for line in text.splitlines()
-    ]
-    if time_scale is not None:
-        lines = [
-            f"time_scale = {time_scale}" if line.startswith("time_scale =") else line
-            for line in lines
-        ]
-    path = folder / config.name
-    path.write_text("\n".join(lines) + "\n")
-    return path
+REDUCED = "mission.stops=[[1.1, 1.2], [2.5, 3.3], [2.7, 4.4]]"
 
 
 @pytest.fixture(scope="module")
@@ -40,8 +19,15 @@ def cache(tmp_path_factory):
     return tmp_path_factory.mktemp("cache")
 
 
-def survey(config: Path, out: Path) -> dict:
-    assert main(["survey", "--config", str(config), "--out", str(out), "--quiet"]) == 0
+def reduced(cache: Path, *sets: str) -> list[str]:
+    """--set arguments: the reduced mission, no recording, a shared model cache, and ``sets``."""
+    settings = (REDUCED, "run.rerun=off", f"run.cache={cache}", *sets)
+    return [arg for setting in settings for arg in ("--set", setting)]
+
+
+def survey(config: str, out: Path, sets: list[str]) -> dict:
+    argv = ["survey", "--config", config, "--out", str(out), "--quiet", *sets]
+    assert main(argv) == 0
     return json.loads((out / "result.json").read_text())["objects"]["rice_box"]
 
 
@@ -49,10 +35,12 @@ def test_the_real_drivers_fly_the_mission_on_the_twins_to_the_same_cell(tmp_path
     """ARCOS driver + VC-C4 driver (on AUX1) over pseudo-terminals to the emulators, world at
     2x (faster, the 100 ms SIP cycle coarsens the base's control and its odometry slips): the
     estimate lands within one cell of the pure-sim run of the same mission."""
-    twins = survey(reduced(TWINS, tmp_path, cache, time_scale=2.0), tmp_path / "twins")
-    sim = survey(
-        reduced(TWINS.with_name("living_room_survey.toml"), tmp_path, cache, None), tmp_path / "sim"
+    twins = survey(
+        "living_room_serial_twins",
+        tmp_path / "twins",
+        reduced(cache, "serial_twins.time_scale=2.0"),
     )
+    sim = survey("living_room_survey", tmp_path / "sim", reduced(cache))
     assert math.dist(twins["estimate_m"], sim["estimate_m"]) <= 0.1 + 1e-9
     assert twins["error_m"] < 0.2
 
@@ -106,27 +94,27 @@ def test_serve_hardware_answers_probe_and_the_drivers_commands(tmp_path, capsys)
 
 
 def test_hardware_configs_name_bad_devices_in_one_line(tmp_path, cache, capsys):
-    text = TWINS.read_text().replace('port = "twin"', 'port = "/dev/no-such-port"')
-    config = tmp_path / "bad.toml"
-    config.write_text(
-        text.replace('file = "living_room.xml"', f'file = "{TWINS.parent / "living_room.xml"}"')
-    )
+    out = tmp_path / "new" / "run"
+    argv = ["survey", "--config", "living_room_serial_twins", "--out", str(out), "--quiet"]
     started = time.monotonic()
-    code = main(["survey", "--config", str(config), "--out", str(tmp_path / "o"), "--quiet"])
+    code = main([*argv, *reduced(cache, "robot.base.port=/dev/no-such-port")])
     err = capsys.readouterr().err.strip()
     assert code == 2 and len(err.splitlines()) == 1
     assert "ARCOS base: open /dev/no-such-port: no such port" in err
-    assert time.monotonic() - started < 30
+    assert time.monotonic() - started < 30  # a missing port fails fast, never a long timeout
+    assert not (tmp_path / "new").exists()  # a false start leaves no run folder to trip over
 
 
 def test_a_line_pulled_mid_mission_is_recovered_and_no_view_is_lost(tmp_path, cache):
     from twin.app.config import load_config
     from twin.app.detection import prepare_detector
     from twin.app.factory import BuildContext, build_robot
-    from twin.app.survey import SurveyContext, run_survey
+    from twin.app.mission import Mission
+    from twin.app.survey import plan_views, run_survey
     from twin.core.grid import AccumulatorGrid
 
-    config = load_config(reduced(TWINS, tmp_path, cache, time_scale=2.0))
+    sets = reduced(cache, "serial_twins.time_scale=2.0")[1::2]
+    config = load_config("living_room_serial_twins", overrides=sets)
     context = BuildContext(config)
     robot, context = build_robot(config, context)
     grid = AccumulatorGrid(["rice_box"], config.grid.spec)
@@ -138,14 +126,12 @@ def test_a_line_pulled_mid_mission_is_recovered_and_no_view_is_lost(tmp_path, ca
 
     try:
         with robot:
-            state = run_survey(
-                SurveyContext(robot, detector, grid, config.mission, tmp_path),
-                on_view=pull_the_cable,
-            )
+            mission = Mission(robot, detector, grid)
+            run_survey(mission, plan_views(config.mission, robot.pantilt.limits), pull_the_cable)
         reconnects = robot.base.reconnects
     finally:
         context.close()
-    assert state.views_done == 24 and grid.views("rice_box") == 24
+    assert mission.views_done == 24 and grid.views("rice_box") == 24
     assert reconnects >= 2
     best = grid.peaks("rice_box", k=1, min_separation=0.5).best
     assert math.dist((best.x, best.y), (1.5, 5.0)) < 0.2

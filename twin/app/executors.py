@@ -6,8 +6,8 @@ on which worker runs it: every task carries its own seed, so the same seed gives
 results whatever the executor and the number of workers.
 
 A worker process runs many tasks in turn (the local pool's and Ray's workers both stay alive
-between tasks), so a task may keep expensive state, e.g. a MuJoCo world, in a module-level cache
-of its worker; it must not let that state change its result.
+between tasks), so a task may keep expensive state, e.g. a MuJoCo world, with ``kept_in_worker``;
+it must not let that state change its result.
 """
 
 from __future__ import annotations
@@ -30,6 +30,28 @@ EXECUTORS = ("local", "ray")
 # of images, so 100 MB (about Ray's minimum) leaves the memory to the workers.
 LOCAL_OBJECT_STORE_BYTES = 100 * 1024 * 1024
 IN_FLIGHT_PER_WORKER = 2  # queued tasks per worker: keeps workers busy, bounds what is lost
+
+
+# What tasks keep in this worker process between tasks (``kept_in_worker``): the one place a
+# worker's state lives, in the local pool's processes, Ray's workers and the inline executor.
+_KEPT: dict[str, Any] = {}
+
+
+def kept_in_worker(
+    key: str, make: Callable[[], T], close: Callable[[T], None] | None = None
+) -> tuple[T, bool]:
+    """This worker's object for ``key`` and whether it was kept from an earlier task; made with
+    ``make`` on first use. A worker keeps one object: a new key closes and replaces the last
+    (a worker serving a new batch drops the old batch's world)."""
+    if key in _KEPT:
+        return _KEPT[key][0], True
+    for old, closer in _KEPT.values():
+        if closer is not None:
+            closer(old)
+    _KEPT.clear()
+    value = make()
+    _KEPT[key] = (value, close)
+    return value, False
 
 
 class Executor(Protocol):

@@ -11,7 +11,7 @@ import sys
 import time
 from pathlib import Path
 
-from twin.commands._args import comma_list, numbers
+from twin.commands._args import add_config_arguments, comma_list, numbers
 from twin.commands.montecarlo import add_executor_arguments
 
 DEFAULT_OUT = Path("runs/batch")
@@ -44,7 +44,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument(
         "--tolerance", type=float, default=0.3, help="success radius in metres (0.3)"
     )
-    parser.add_argument("--config", type=Path, help="survey config (TOML); default: shipped")
+    add_config_arguments(parser)
     parser.add_argument("--out", type=Path, default=DEFAULT_OUT, help=f"folder ({DEFAULT_OUT})")
     add_executor_arguments(parser)
     parser.add_argument("--fresh", action="store_true", help="discard a previous batch in --out")
@@ -55,32 +55,25 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     from tqdm import tqdm
 
-    from twin.app.batch import (
-        JOURNAL_NAME,
-        BatchJournal,
-        BatchSpec,
-        prepare,
-        run_batch,
-        write_summary,
-    )
-    from twin.app.config import ConfigError, default_config_path
+    from twin.app.batch import JOURNAL_NAME, BatchJournal, BatchSpec, prepare, run_batch
+    from twin.app.batch_report import write_summary
     from twin.app.executors import make_executor
+    from twin.app.outputs import check_output_folder, make_output_folder
     from twin.core.errors import InputError
 
     started = time.perf_counter()
     if args.runs < 1:
         raise InputError(f"--runs must be at least 1, got {args.runs}")
-    source = (args.config or default_config_path()).resolve()
-    try:
-        text = source.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise ConfigError(f"{source}: no such config file; check the path") from None
-    spec = BatchSpec(
-        text, source.name, str(source.parent), str(Path.cwd()), args.seed,
-        tuple(dict.fromkeys(args.vary)), args.lighting, args.threshold, args.tolerance,
+    spec = BatchSpec.from_config(
+        args.config, tuple(args.set), seed=args.seed, vary=tuple(dict.fromkeys(args.vary)),
+        lighting=args.lighting, threshold=args.threshold, tolerance=args.tolerance,
     )  # fmt: skip
+    check_output_folder(
+        args.out, "--out", lambda p: (p / JOURNAL_NAME).is_file(), "a twin batch-survey"
+    )
     say = (lambda _: None) if args.quiet else print
     prepare(spec, say)
+    make_output_folder(args.out, "--out")
     journal = BatchJournal(args.out / JOURNAL_NAME, spec, fresh=args.fresh)
     done = sum(1 for i in journal.done if i < args.runs)
     if done:
@@ -93,6 +86,14 @@ def run(args: argparse.Namespace) -> int:
     try:
         with bar:
             results = run_batch(spec, args.runs, executor, journal, lambda _: bar.update())
+    except KeyboardInterrupt:
+        finished = [journal.done[i] for i in sorted(journal.done) if i < args.runs]
+        if finished:  # the runs that finished are results too: summarize them
+            _, paths = write_summary(args.out, spec, finished, time.perf_counter() - started)
+            wrote = ", ".join(str(p) for p in paths)
+            say(f"stopped after {len(finished)} of {args.runs} runs; wrote {wrote}; "
+                "run the same command to finish")  # fmt: skip
+        raise
     finally:
         executor.close()
     summary, paths = write_summary(args.out, spec, results, time.perf_counter() - started)

@@ -84,6 +84,32 @@ class World:
         self.model = load_model(self.path)
         self.data = mujoco.MjData(self.model)
         mujoco.mj_forward(self.model, self.data)
+        # As loaded, so that a reused world can be put back: what placing and lighting edit.
+        self._loaded_bodies = (self.model.body_pos.copy(), self.model.body_quat.copy())
+        self._loaded_lights = (
+            self.model.light_diffuse.copy(),
+            self.model.vis.headlight.diffuse.copy(),
+            self.model.vis.headlight.ambient.copy(),
+        )
+
+    def reset(self) -> None:
+        """Put the world back as it was loaded: bodies moved by ``place_static_body`` return,
+        the lights take their scene intensities, and the physics restarts at time 0 (MuJoCo's
+        reset state, no warm start). A mission in a reset world runs as in a fresh one."""
+        self.model.body_pos[:], self.model.body_quat[:] = self._loaded_bodies
+        self.scale_lighting(1.0)
+        mujoco.mj_resetData(self.model, self.data)
+        self.forward()
+
+    def scale_lighting(self, factor: float) -> None:
+        """Scale the diffuse intensity of every scene light, and the headlight's diffuse and
+        ambient, by ``factor`` relative to the scene's own (1 is the scene as written)."""
+        if not (math.isfinite(factor) and factor >= 0.0):
+            raise InputError(f"a lighting scale must be a finite number >= 0, got {factor!r}")
+        diffuse, head_diffuse, head_ambient = self._loaded_lights
+        self.model.light_diffuse[:] = diffuse * factor
+        self.model.vis.headlight.diffuse[:] = head_diffuse * factor
+        self.model.vis.headlight.ambient[:] = head_ambient * factor
 
     # -- clock and stepping -------------------------------------------------------------------
     @property
@@ -253,6 +279,17 @@ class World:
             geomid,
         )
         return 0.0 if dist < 0 else 3.0 - float(dist)
+
+    def support_of(self, name: str) -> str:
+        """The furniture whose footprint holds the body's (x, y) position, or "floor"."""
+        x, y = (float(v) for v in self.body_position(name)[:2])
+        for other in self.furniture():
+            if other == name:
+                continue
+            xmin, ymin, xmax, ymax = self.footprint(other).aabb
+            if xmin <= x <= xmax and ymin <= y <= ymax:
+                return other
+        return "floor"
 
     def place_static_body(self, name: str, x: float, y: float, yaw: float) -> Pose2D:
         """Move a jointless body (e.g. a target) to stand on whatever surface is below (x, y).
