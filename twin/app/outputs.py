@@ -40,13 +40,29 @@ def check_output_folder(path: Path, flag: str, is_ours: Callable[[Path], bool], 
             )
         _require_writable(path, flag, path)
         return False
+    _require_creatable(path, flag)
+    return False
+
+
+def check_output_file(path: Path, flag: str) -> None:
+    """A one-line ``InputError`` naming ``flag`` unless a file can be written at ``path``: it is
+    not a folder, does not lie inside a file, and its folder exists or can be made, writable."""
+    if path.is_dir():
+        raise InputError(f"{flag} {path}: is a folder; give a file name to write")
+    if path.parent.is_dir():
+        _require_writable(path.parent, flag, path)
+    else:
+        _require_creatable(path.parent, flag)
+
+
+def _require_creatable(path: Path, flag: str) -> None:
+    """``path`` does not exist: its nearest existing ancestor must be a writable folder."""
     ancestor = path.parent
     while not ancestor.exists() and ancestor != ancestor.parent:
         ancestor = ancestor.parent
     if not ancestor.is_dir():
         raise InputError(f"{flag} {path}: lies inside {ancestor}, which is a file; choose a folder")
     _require_writable(ancestor, flag, path)
-    return False
 
 
 def _require_writable(folder: Path, flag: str, path: Path) -> None:

@@ -230,8 +230,10 @@ def _describe(path: Path, model: Any) -> str:
 
 
 def _train(args: argparse.Namespace) -> int:
+    from twin.app.outputs import check_output_file
     from twin.rfch import RFCH
 
+    check_output_file(args.out, "--out")
     images, masks = _read_views(args.images, args.masks)
     codebook = RFCH.load(args.codebook) if args.codebook else None
     model = RFCH.train(args.name, images, masks, codebook=codebook, **_parameters(args))
@@ -241,8 +243,10 @@ def _train(args: argparse.Namespace) -> int:
 
 
 def _train_shared(args: argparse.Namespace) -> int:
+    from twin.app.outputs import check_output_folder
     from twin.rfch import RFCH
 
+    check_output_folder(args.out_dir, "--out-dir", lambda _: True, "")  # models go beside others
     objects = {}
     for text in args.object:
         name, _, dirs = text.partition("=")
@@ -261,8 +265,10 @@ def _train_shared(args: argparse.Namespace) -> int:
 
 
 def _detect(args: argparse.Namespace) -> int:
+    from twin.app.outputs import check_output_file
     from twin.rfch import RFCH, Detector
 
+    check_output_file(args.out, "--out")
     detector = Detector([RFCH.load(path) for path in args.model])
     image = read_image(args.image)
     scores = detector.scores(image)
@@ -330,12 +336,16 @@ def _roc(args: argparse.Namespace) -> int:
     import matplotlib.pyplot as plt
     import numpy as np
 
+    from twin.app.outputs import check_output_file
     from twin.core.store import write_atomic, write_text_atomic
     from twin.rfch import RFCH
     from twin.rfch.roc import column_truth, roc_curve
 
     if args.max_fp is not None and not 0.0 <= args.max_fp <= 1.0:
         raise InputError(f"--max-fp must be in [0, 1], got {args.max_fp}")
+    check_output_file(args.out, "--out")
+    if args.csv is not None:
+        check_output_file(args.csv, "--csv")
     model = RFCH.load(args.model)
     all_scores, all_truth = [], []
     for path in list_images(args.images):

@@ -8,6 +8,7 @@ from __future__ import annotations
 import argparse
 import math
 import time
+from pathlib import Path
 
 from twin.core.errors import InputError
 from twin.core.geometry import Pose2D
@@ -44,6 +45,9 @@ def _error(a: Pose2D, b: Pose2D) -> str:
 
 
 def _snapshot(args: argparse.Namespace) -> int:
+    from twin.app.outputs import check_output_file
+
+    check_output_file(Path(args.out), "--out")
     pose = parse_pose(args.pose, "--pose")
     pan, tilt = _degrees(args.pan, "--pan"), _degrees(args.tilt, "--tilt")
     from twin.sim.render import write_png
@@ -94,8 +98,11 @@ def _drive(args: argparse.Namespace) -> int:
 
 
 def _contact_sheet(args: argparse.Namespace) -> int:
+    from twin.app.outputs import check_output_file
+
     if not 0.1 <= args.scale <= 1.0:
         raise InputError(f"--scale {args.scale}: must be within [0.1, 1]")
+    check_output_file(Path(args.out), "--out")
     from twin.sim.sheet import make_contact_sheet
 
     out = make_contact_sheet(args.out, args.scene, scale=args.scale)
