@@ -10,8 +10,8 @@ passed, and a run that fails before it has saved anything worth resuming removes
 from __future__ import annotations
 
 import contextlib
-import os
 import shutil
+import tempfile
 from collections.abc import Callable, Iterator
 from pathlib import Path
 
@@ -22,7 +22,8 @@ def check_output_folder(path: Path, flag: str, is_ours: Callable[[Path], bool], 
     """Whether ``path`` already is one of ours (``is_ours``); ``False`` if it is new or empty.
 
     Raises a one-line ``InputError`` naming ``flag`` when ``path`` is a file, lies inside a
-    file, cannot be made, or is a folder holding files that are not ``what``.
+    file, cannot be made or written, or is a folder holding files that are not ``what``.
+    Nothing is left behind by the check.
     """
     if path.exists() and not path.is_dir():
         raise InputError(f"{flag} {path}: is a file, not a folder; give a folder to write into")
@@ -38,41 +39,45 @@ def check_output_folder(path: Path, flag: str, is_ours: Callable[[Path], bool], 
                 f"{flag} {path}: holds files that are not {what} (e.g. {entries[0]}); "
                 "choose a new or empty folder (it is never overwritten)"
             )
-        _require_writable(path, flag, path)
-        return False
-    _require_creatable(path, flag)
+    _probe(path, flag, path)
     return False
 
 
 def check_output_file(path: Path, flag: str) -> None:
     """A one-line ``InputError`` naming ``flag`` unless a file can be written at ``path``: it is
-    not a folder, does not lie inside a file, and its folder exists or can be made, writable."""
+    not a folder, does not lie inside a file, and its folder exists or can be made, writable.
+    Nothing is left behind by the check."""
     if path.is_dir():
         raise InputError(f"{flag} {path}: is a folder; give a file name to write")
-    if path.parent.is_dir():
-        _require_writable(path.parent, flag, path)
-    else:
-        _require_creatable(path.parent, flag)
+    _probe(path.parent, flag, path)
 
 
-def _require_creatable(path: Path, flag: str) -> None:
-    """``path`` does not exist: its nearest existing ancestor must be a writable folder."""
-    ancestor = path.parent
+def _probe(folder: Path, flag: str, shown: Path) -> None:
+    """Make ``folder`` (if missing) and a scratch file in it, then remove both: the one honest
+    test that a place can be written (permissions, read-only mounts, /proc, a file in the way)."""
+    ancestor = folder
     while not ancestor.exists() and ancestor != ancestor.parent:
         ancestor = ancestor.parent
     if not ancestor.is_dir():
-        raise InputError(f"{flag} {path}: lies inside {ancestor}, which is a file; choose a folder")
-    _require_writable(ancestor, flag, path)
-
-
-def _require_writable(folder: Path, flag: str, path: Path) -> None:
-    if not os.access(folder, os.W_OK | os.X_OK):
         raise InputError(
-            f"{flag} {path}: cannot write there ({folder} is not writable); choose another folder"
+            f"{flag} {shown}: lies inside {ancestor}, which is a file; choose a folder"
         )
+    created: list[Path] = []
+    try:
+        created = make_output_folder(folder, flag, shown)
+        with tempfile.TemporaryFile(dir=folder):
+            pass
+    except OSError as exc:
+        raise InputError(
+            f"{flag} {shown}: cannot write there ({exc.strerror}); choose another folder"
+        ) from None
+    finally:
+        for made in reversed(created):
+            with contextlib.suppress(OSError):
+                made.rmdir()
 
 
-def make_output_folder(path: Path, flag: str) -> list[Path]:
+def make_output_folder(path: Path, flag: str, shown: Path | None = None) -> list[Path]:
     """Create ``path`` (and missing parents); returns the folders this made, outermost first."""
     missing = []
     probe = path
@@ -84,8 +89,12 @@ def make_output_folder(path: Path, flag: str) -> list[Path]:
     try:
         path.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
+        for made in missing:  # innermost first: whatever mkdir made before it failed
+            with contextlib.suppress(OSError):
+                made.rmdir()
         raise InputError(
-            f"{flag} {path}: cannot create the folder ({exc.strerror}); choose another folder"
+            f"{flag} {shown or path}: cannot create the folder ({exc.strerror}); "
+            "choose another folder"
         ) from None
     return list(reversed(missing))
 
