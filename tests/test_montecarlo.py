@@ -1,32 +1,39 @@
 """The paper's Section 3 Monte Carlo: its statements, reproducibility, resuming, the command."""
 
 import csv
+import json
 import math
+from dataclasses import asdict, dataclass
+from typing import ClassVar
 
 import numpy as np
 import pytest
 
 from twin.app.executors import InlineExecutor, ProcessExecutor
 from twin.app.montecarlo import (
-    KERNEL_RULES,
     RESULT_COLUMNS,
     SweepConfig,
     SweepJournal,
     _wedge_meets_cell,
     draw_trial,
+    evidence_layers,
     run_setting,
     run_sweep,
+    run_trial,
+    sweep_rules,
     trial_rng,
 )
 from twin.cli import main
+from twin.core import fusion
 from twin.core.errors import InputError
+from twin.core.grid import AccumulatorGrid, GridSpec
 
 # 400 trials: a 95 % interval of about +-5 points on a rate near 50 %.
 FIRM = SweepConfig(trials=400, views=(10, 25, 150))
 
 
 def rate(result, rule, views):
-    return result.successes[KERNEL_RULES.index(rule), FIRM.checkpoints.index(views)] / FIRM.trials
+    return result.successes[FIRM.fusion.index(rule), FIRM.checkpoints.index(views)] / FIRM.trials
 
 
 @pytest.fixture(scope="module")
@@ -56,7 +63,7 @@ def test_false_positives_hurt_more_than_false_negatives(firm_results):
 
 def test_a_silent_detector_scores_chance_not_a_tie_breaking_bias(firm_results):
     chance = 9 / FIRM.grid**2
-    for rule in KERNEL_RULES:
+    for rule in FIRM.fusion:
         assert rate(firm_results[(0.0, 1.0)], rule, 150) < chance + 0.04
 
 
@@ -96,6 +103,153 @@ def test_results_do_not_depend_on_workers_or_other_settings():
     np.testing.assert_array_equal(alone.successes, inline[-1].successes)
 
 
+# Successes (accumulate, normalized, logodds) x (10, 25 views) recorded before the sweep drove
+# the rules through twin.core.fusion, when its kernel coded them itself.
+PINNED = SweepConfig(pfp=(0.0, 0.3, 0.7), pfn=(0.0, 0.5), views=(10, 25), trials=20, seed=3,
+                     min_observed=2.0)  # fmt: skip
+PINNED_SUCCESSES = {
+    (0.0, 0.0): [[11, 18], [5, 15], [12, 18]],
+    (0.0, 0.5): [[6, 13], [4, 14], [4, 14]],
+    (0.3, 0.0): [[3, 6], [2, 10], [3, 12]],
+    (0.3, 0.5): [[0, 1], [0, 0], [0, 1]],
+    (0.7, 0.0): [[2, 2], [2, 7], [4, 5]],
+    (0.7, 0.5): [[0, 0], [0, 0], [1, 1]],
+}
+
+
+def test_the_three_rules_give_the_results_recorded_before_they_came_from_fusion():
+    results = run_sweep(PINNED, InlineExecutor())
+    assert {(r.pfp, r.pfn): r.successes.tolist() for r in results} == PINNED_SUCCESSES
+
+
+def direct_successes(config, pfp, pfn, trial):
+    """One trial recomputed through the grid's own API: an AccumulatorGrid per rule fused view
+    by view, its ``layer`` read, and the arg-max tie broken as the module documents."""
+    draws = draw_trial(config, trial_rng(config.seed, pfp, pfn, trial))
+    spec = GridSpec(0.0, 0.0, config.grid, config.grid, 1.0)
+    rules = sweep_rules(config, pfp, pfn)
+    grids = [AccumulatorGrid(["object"], spec, rule, config.supersample) for rule in rules]
+    wedge = config.fov / config.wedges
+    out = np.zeros((len(rules), len(config.checkpoints)), dtype=bool)
+    c = 0
+    for v in range(config.checkpoints[-1]):
+        top = draws.yaw[v] + 0.5 * config.fov - wedge * np.arange(config.wedges)
+        intervals = np.stack([top - wedge, top], axis=1)
+        values = np.zeros(config.wedges)
+        for w, (a0, a1) in enumerate(intervals):
+            hit = _wedge_meets_cell(draws.x[v], draws.y[v], a0, a1, draws.object_col,
+                                    draws.object_row)  # fmt: skip
+            values[w] = draws.fire[v, w] < ((1.0 - pfn) if hit else pfp)
+        for grid in grids:
+            grid.fuse("object", (draws.x[v], draws.y[v]), intervals, values)
+        if v + 1 == config.checkpoints[c]:
+            for r, grid in enumerate(grids):
+                layer = grid.layer("object")
+                top_value = layer.max()
+                tied = np.flatnonzero(layer >= top_value - 1e-9 * max(1.0, abs(top_value)))
+                pick = tied[min(int(draws.tie[c] * len(tied)), len(tied) - 1)]
+                row, col = divmod(pick, config.grid)
+                near = abs(row - draws.object_row) <= 1 and abs(col - draws.object_col) <= 1
+                out[r, c] = near
+            c += 1
+    return out
+
+
+@pytest.mark.parametrize("setting", [(0.0, 0.0), (0.3, 0.5), (0.2, 0.1)])
+def test_each_trial_matches_a_direct_computation_through_the_grid(setting):
+    config = SweepConfig(views=(6, 15, 40), trials=4, seed=9, min_observed=1.5)
+    for trial in range(config.trials):
+        expected = direct_successes(config, *setting, trial)
+        np.testing.assert_array_equal(run_trial(config, *setting, trial), expected)
+
+
+@dataclass(frozen=True)
+class Silences:
+    """A rule fusion.py does not have: cells seen by many silent wedges, scaled by P_fn."""
+
+    name: ClassVar[str] = "silences"
+    p_fn: float = 0.5
+
+    def column_weights(self, values: np.ndarray) -> np.ndarray:
+        return 1.0 - np.asarray(values, dtype=float)
+
+    def read(self, evidence: np.ndarray, observed: np.ndarray) -> np.ndarray:
+        return (1.0 - self.p_fn) * evidence - observed
+
+    def params(self) -> dict[str, float]:
+        return asdict(self)
+
+
+@dataclass(frozen=True)
+class Echo:
+    """The paper's weights read another way: shares accumulate's evidence sum."""
+
+    name: ClassVar[str] = "echo"
+
+    def column_weights(self, values: np.ndarray) -> np.ndarray:
+        return np.asarray(values, dtype=float)
+
+    def read(self, evidence: np.ndarray, observed: np.ndarray) -> np.ndarray:
+        return 2.0 * evidence
+
+
+def test_a_rule_registered_in_fusion_runs_through_the_sweep(monkeypatch):
+    monkeypatch.setitem(fusion.RULES, "silences", Silences)
+    monkeypatch.setitem(fusion.RULES, "echo", Echo)
+    config = SweepConfig(pfp=(0.1, 0.4), pfn=(0.2,), views=(5, 20), trials=3, seed=2,
+                         fusion=("silences", "accumulate", "echo", "logodds"))  # fmt: skip
+    rules = sweep_rules(config, 0.1, 0.2)
+    assert rules[0] == Silences(p_fn=0.2)  # the setting's true rate, as logodds gets it
+    weights, layer_of = evidence_layers(rules)
+    assert layer_of == (0, 1, 1, 2) and len(weights) == 3  # echo shares accumulate's sum
+    results = run_sweep(config, InlineExecutor())
+    for result in results:
+        direct = sum(direct_successes(config, result.pfp, result.pfn, t) for t in range(3))
+        np.testing.assert_array_equal(result.successes, direct)
+        np.testing.assert_array_equal(result.successes[2], result.successes[1])
+    assert {row["fusion"] for row in results[0].rows()} == set(config.fusion)
+
+
+@dataclass(frozen=True)
+class NeedsGain:
+    name: ClassVar[str] = "gain"
+    gain: float
+
+    def column_weights(self, values: np.ndarray) -> np.ndarray:
+        return self.gain * np.asarray(values, dtype=float)
+
+    def read(self, evidence: np.ndarray, observed: np.ndarray) -> np.ndarray:
+        return evidence
+
+
+def test_a_rule_whose_parameters_the_sweep_cannot_supply_is_a_one_line_error(
+    monkeypatch, tmp_path, capsys
+):
+    monkeypatch.setitem(fusion.RULES, "gain", NeedsGain)
+    with pytest.raises(InputError, match=r"cannot supply its parameter\(s\) gain"):
+        SweepConfig(fusion=("accumulate", "gain"))
+    code = main(["montecarlo", "--trials", "1", "--fusion", "gain", "--out", str(tmp_path)])
+    err = capsys.readouterr().err.strip()
+    assert code == 2 and len(err.splitlines()) == 1 and "gain" in err
+
+
+def test_a_rule_that_writes_into_the_shared_sums_fails_instead_of_corrupting_others(
+    monkeypatch,
+):
+    @dataclass(frozen=True)
+    class Scribble(Echo):
+        name: ClassVar[str] = "scribble"
+
+        def read(self, evidence, observed):
+            evidence += 1.0
+            return evidence
+
+    monkeypatch.setitem(fusion.RULES, "scribble", Scribble)
+    config = SweepConfig(pfp=(0.1,), pfn=(0.1,), views=(3,), trials=1, fusion=("scribble",))
+    with pytest.raises(ValueError, match="read-only"):
+        run_setting(config, (0.1, 0.1))
+
+
 def test_an_interrupted_sweep_resumes_without_rerunning_finished_settings(tmp_path):
     journal_path = tmp_path / "settings.jsonl"
 
@@ -130,12 +284,31 @@ def test_a_journal_of_another_sweep_is_refused(tmp_path):
     assert SweepJournal(path, other, fresh=True).done == {}
 
 
+def test_a_journal_that_did_not_record_its_rules_is_refused_in_one_line(tmp_path):
+    path = tmp_path / "settings.jsonl"
+    SweepJournal(path, SMALL)
+    lines = path.read_text().splitlines()
+    header = json.loads(lines[0])
+    del header["sweep"]["fusion"]  # as sweeps wrote it when every rule always ran
+    path.write_text(json.dumps(header) + "\n")
+    with pytest.raises(InputError, match="older twin that did not record its rules") as info:
+        SweepJournal(path, SMALL)
+    assert "--fresh" in str(info.value) and "\n" not in str(info.value)
+    assert SweepJournal(path, SMALL, fresh=True).done == {}
+    narrower = SweepConfig(pfp=SMALL.pfp, pfn=SMALL.pfn, views=SMALL.views, trials=6, seed=3,
+                           fusion=("logodds",))  # fmt: skip
+    with pytest.raises(InputError, match=r"other parameters \(fusion\)"):
+        SweepJournal(path, narrower)
+
+
 @pytest.mark.parametrize(
     ("kwargs", "match"),
     [({"pfp": (1.5,)}, "--pfp"), ({"pfn": (-0.1,)}, "--pfn"), ({"views": (0,)}, "--views"),
      ({"trials": 0}, "--trials"), ({"wedges": 0}, "--wedges"), ({"grid": 2}, "--grid"),
      ({"fov": 0.0}, "--fov-deg"), ({"supersample": 0}, "--supersample"),
-     ({"fusion": ("bayes",)}, "--fusion"), ({"seed": -1}, "--seed")],
+     ({"fusion": ("bayes",)}, "--fusion"), ({"seed": -1}, "--seed"),
+     ({"fusion": ("logodds", "logodds")}, "--fusion names a rule twice"),
+     ({"min_observed": -1.0}, "--min-observed")],
 )  # fmt: skip
 def test_bad_sweep_parameters_are_named(kwargs, match):
     with pytest.raises(InputError, match=match):

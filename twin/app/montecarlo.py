@@ -5,7 +5,14 @@ outer edge. Every view puts the robot at a uniformly random point anywhere but i
 cell, with a uniformly random heading; its field of view is split into equal-angle wedges that
 reach to the map's edge. A wedge whose angular span meets the object's cell (exactly, from the
 cell's corners) fires with probability 1 - P_fn, any other wedge with probability P_fp; a fired
-wedge has value 1. All fusion rules update their own grids from the same views and firings.
+wedge has value 1.
+
+The rules are ``twin.core.fusion``'s, named by ``--fusion`` (any registered rule, with the
+parameters this sweep can supply: the setting's true P_fp and P_fn, and --min-observed). Each
+rule's weights for a silent and a fired wedge (``column_weights([0, 1])``) name an evidence
+layer; rules with the same weights share one, and all share the ``observed`` layer, so one
+coverage pass per view updates every rule. The layers are copied at each checkpoint, and each
+rule's element-wise ``read`` turns a whole batch of trials x checkpoints into confidence maps.
 
 After each checkpoint (by default 10, 25, 75 and 150 views of one trial: nested, so one trial
 yields all view counts) the trial succeeds for a rule when that rule's maximal cell is the
@@ -22,7 +29,9 @@ settings run, or which other settings are in the sweep.
 from __future__ import annotations
 
 import csv
+import inspect
 import io
+import json
 import math
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
@@ -34,13 +43,14 @@ from numba import njit
 
 from twin.app.executors import Executor
 from twin.core.coverage import add_coverage
-from twin.core.errors import InputError
-from twin.core.fusion import RULES, logodds_weights
+from twin.core.errors import InputError, TwinError
+from twin.core.fusion import RULES, FusionRule, make_rule
 from twin.core.store import JsonLinesJournal, write_text_atomic
 
 DEFAULT_RATES: tuple[float, ...] = tuple(round(0.1 * i, 1) for i in range(11))
-# Indices of the rules inside the trial kernel's state; the order is fixed.
-KERNEL_RULES: tuple[str, ...] = ("accumulate", "normalized", "logodds")
+DEFAULT_FUSION: tuple[str, ...] = ("accumulate", "normalized", "logodds")
+# What a detector wedge's match value is when silent and when fired.
+BINARY_VALUES = np.array([0.0, 1.0])
 RESULT_COLUMNS: tuple[str, ...] = (
     "fusion",
     "pfp",
@@ -52,6 +62,8 @@ RESULT_COLUMNS: tuple[str, ...] = (
 )
 _TIE_RTOL = 1e-9
 _RATE_KEY_SCALE = 1e9
+# Checkpoint copies of the layers (and confidence maps) of one batch of trials stay below this.
+_BATCH_BYTES = 32 * 1024 * 1024
 
 
 @dataclass(frozen=True)
@@ -66,7 +78,7 @@ class SweepConfig:
     fov: float = math.radians(45.0)
     grid: int = 20
     supersample: int = 10
-    fusion: tuple[str, ...] = KERNEL_RULES
+    fusion: tuple[str, ...] = DEFAULT_FUSION
     seed: int = 0
     min_observed: float = 1.0
 
@@ -91,6 +103,16 @@ class SweepConfig:
             bool(self.fusion) and not unknown,
             f"--fusion: unknown rule(s) {unknown or self.fusion!r}; choose from {', '.join(RULES)}",
         )
+        _require(
+            len(set(self.fusion)) == len(self.fusion),
+            f"--fusion names a rule twice: {', '.join(self.fusion)}",
+        )
+        _require(
+            math.isfinite(self.min_observed) and self.min_observed >= 0.0,
+            f"--min-observed must be a number >= 0 of full-cell views, got {self.min_observed!r}",
+        )
+        for pfp, pfn in self.settings():
+            sweep_rules(self, pfp, pfn)  # a rule this sweep cannot parametrize fails here
 
     @property
     def checkpoints(self) -> tuple[int, ...]:
@@ -102,18 +124,18 @@ class SweepConfig:
 
 @dataclass(frozen=True)
 class SettingResult:
-    """Successes of every kernel rule at every checkpoint, for one (P_fp, P_fn) setting."""
+    """Successes of every rule at every checkpoint, for one (P_fp, P_fn) setting."""
 
     pfp: float
     pfn: float
     trials: int
     checkpoints: tuple[int, ...]
-    successes: np.ndarray = field(repr=False)  # (len(KERNEL_RULES), len(checkpoints)) ints
+    fusion: tuple[str, ...]
+    successes: np.ndarray = field(repr=False)  # (len(fusion), len(checkpoints)) ints
 
-    def rows(self, fusion: Iterable[str]) -> list[dict[str, object]]:
+    def rows(self) -> list[dict[str, object]]:
         out = []
-        for rule in fusion:
-            r = KERNEL_RULES.index(rule)
+        for r, rule in enumerate(self.fusion):
             for c, views in enumerate(self.checkpoints):
                 hits = int(self.successes[r, c])
                 out.append(
@@ -133,6 +155,51 @@ class SettingResult:
 def _require(condition: bool, message: str) -> None:
     if not condition:
         raise InputError(message)
+
+
+def _rule_for(name: str, offered: dict[str, float]) -> FusionRule:
+    """Rule ``name`` with the parameters its constructor names among ``offered``; the others
+    keep their defaults, and one without a default that the sweep cannot supply is an error."""
+    accepted = inspect.signature(RULES[name]).parameters
+    missing = [
+        p.name
+        for p in accepted.values()
+        if p.default is p.empty
+        and p.kind in (p.POSITIONAL_OR_KEYWORD, p.KEYWORD_ONLY)
+        and p.name not in offered
+    ]
+    _require(
+        not missing,
+        f"--fusion {name}: the Monte Carlo cannot supply its parameter(s) {', '.join(missing)} "
+        f"(it supplies {', '.join(offered)}); give them defaults or leave the rule out",
+    )
+    return make_rule(name, **{k: v for k, v in offered.items() if k in accepted})
+
+
+def sweep_rules(config: SweepConfig, pfp: float, pfn: float) -> tuple[FusionRule, ...]:
+    """The rules of ``config.fusion`` for one setting: each gets, if it takes them, the
+    detector's true rates (``p_fp``, ``p_fn``) and ``min_observed`` (full-cell views)."""
+    offered = {"p_fp": pfp, "p_fn": pfn, "min_observed": config.min_observed}
+    return tuple(_rule_for(name, offered) for name in config.fusion)
+
+
+def evidence_layers(rules: Sequence[FusionRule]) -> tuple[np.ndarray, tuple[int, ...]]:
+    """The distinct (silent, fired) weight pairs of ``rules`` as a (layers, 2) array, and the
+    layer of each rule: rules that weight the binary detector alike share one evidence sum."""
+    pairs: list[tuple[float, float]] = []
+    layer_of = []
+    for rule in rules:
+        weights = np.asarray(rule.column_weights(BINARY_VALUES), dtype=float)
+        if weights.shape != BINARY_VALUES.shape:
+            raise TwinError(
+                f"fusion rule {rule.name!r}: column_weights gave shape {weights.shape} for "
+                f"{BINARY_VALUES.size} values; it must give one weight per column"
+            )
+        pair = (float(weights[0]), float(weights[1]))
+        if pair not in pairs:
+            pairs.append(pair)
+        layer_of.append(pairs.index(pair))
+    return np.array(pairs, dtype=float).reshape(-1, 2), tuple(layer_of)
 
 
 def trial_rng(seed: int, pfp: float, pfn: float, trial: int) -> np.random.Generator:
@@ -218,62 +285,109 @@ def _argmax_hits(values, tie_u, object_row, object_col) -> bool:
 
 
 @njit(cache=True)
+def _score(confidence, tie_u, object_rows, object_cols, out) -> None:
+    """out[t, c] = whether trial t's confidence map at checkpoint c hits its object."""
+    for t in range(confidence.shape[0]):
+        for c in range(confidence.shape[1]):
+            out[t, c] = _argmax_hits(confidence[t, c], tie_u[t, c], object_rows[t], object_cols[t])
+
+
+@njit(cache=True)
 def _run_trial(
-    n, supersample, fov, n_wedges, object_row, object_col, xs, ys, yaws, fire_u, tie_u,
-    checkpoints, pfp, pfn, fired_weight, silent_weight, min_observed,
+    n, supersample, fov, n_wedges, object_row, object_col, xs, ys, yaws, fire_u, checkpoints,
+    pfp, pfn, layer_weights, out,
 ):  # fmt: skip
-    """Run one trial for all three rules; returns successes (3, len(checkpoints)) as bools."""
-    # state[0]: evidence of accumulate and normalized (same sums), [1]: observed, [2]: logodds
-    state = np.zeros((3, n, n))
+    """Fuse one trial's views; out[k, c] gets layer k at checkpoint c.
+
+    Layers are one evidence sum per row of ``layer_weights`` ((silent, fired) weights), then the
+    observed sum (weight 1), all (n, n) over cells.
+    """
+    n_layers = layer_weights.shape[0]
+    state = np.zeros((n_layers + 1, n, n))
     a0 = np.empty(n_wedges)
     a1 = np.empty(n_wedges)
-    weights = np.empty((3, n_wedges))
+    weights = np.ones((n_layers + 1, n_wedges))
     wedge = fov / n_wedges
-    success = np.zeros((3, checkpoints.shape[0]), dtype=np.bool_)
-    normalized = np.zeros((n, n))
     c = 0
     for v in range(xs.shape[0]):
         for w in range(n_wedges):
             a1[w] = yaws[v] + 0.5 * fov - w * wedge
             a0[w] = a1[w] - wedge
             hit = _wedge_meets_cell(xs[v], ys[v], a0[w], a1[w], object_col, object_row)
-            fired = fire_u[v, w] < ((1.0 - pfn) if hit else pfp)
-            weights[0, w] = 1.0 if fired else 0.0
-            weights[1, w] = 1.0
-            weights[2, w] = fired_weight if fired else silent_weight
+            fired = 1 if fire_u[v, w] < ((1.0 - pfn) if hit else pfp) else 0
+            for k in range(n_layers):
+                weights[k, w] = layer_weights[k, fired]
         add_coverage(state, xs[v], ys[v], a0, a1, weights, 0.0, 0.0, 1.0, supersample, 0.0)
         if v + 1 == checkpoints[c]:
-            for r in range(n):
-                for q in range(n):
-                    seen = state[1, r, q]
-                    ok = seen > 0.0 and seen >= min_observed
-                    normalized[r, q] = state[0, r, q] / seen if ok else 0.0
-            success[0, c] = _argmax_hits(state[0], tie_u[c], object_row, object_col)
-            success[1, c] = _argmax_hits(normalized, tie_u[c], object_row, object_col)
-            success[2, c] = _argmax_hits(state[2], tie_u[c], object_row, object_col)
+            out[:, c] = state
             c += 1
             if c == checkpoints.shape[0]:
                 break
-    return success
+
+
+def _batch_size(config: SweepConfig, n_layers: int) -> int:
+    """Trials whose checkpoint copies and confidence maps fit in ``_BATCH_BYTES``."""
+    per_trial = (n_layers + 2) * len(config.checkpoints) * config.grid**2 * 8
+    return max(1, _BATCH_BYTES // per_trial)
+
+
+def _run_batch(
+    config: SweepConfig,
+    pfp: float,
+    pfn: float,
+    trials: range,
+    rules: Sequence[FusionRule],
+    layer_weights: np.ndarray,
+    layer_of: Sequence[int],
+) -> np.ndarray:
+    """Successes (len(rules), len(trials), len(checkpoints)) of some trials, as booleans."""
+    n, checkpoints = config.grid, np.asarray(config.checkpoints, dtype=np.int64)
+    n_layers = len(layer_weights)
+    # Layer first, so each rule reads contiguous (trials, checkpoints, n, n) blocks.
+    layers = np.zeros((n_layers + 1, len(trials), len(checkpoints), n, n))
+    ties = np.empty((len(trials), len(checkpoints)))
+    object_rows = np.empty(len(trials), dtype=np.int64)
+    object_cols = np.empty(len(trials), dtype=np.int64)
+    for t, trial in enumerate(trials):
+        draws = draw_trial(config, trial_rng(config.seed, pfp, pfn, trial))
+        ties[t], object_rows[t], object_cols[t] = draws.tie, draws.object_row, draws.object_col
+        _run_trial(
+            n, config.supersample, config.fov, config.wedges, draws.object_row, draws.object_col,
+            draws.x, draws.y, draws.yaw, draws.fire, checkpoints, pfp, pfn, layer_weights,
+            layers[:, t],
+        )  # fmt: skip
+    layers.flags.writeable = False  # shared by the rules' reads: none may change it
+    observed = layers[-1]
+    hits = np.empty((len(rules), len(trials), len(checkpoints)), dtype=np.bool_)
+    for r, rule in enumerate(rules):
+        confidence = np.asarray(rule.read(layers[layer_of[r]], observed), dtype=float)
+        if confidence.shape != observed.shape:
+            raise TwinError(
+                f"fusion rule {rule.name!r}: read gave shape {confidence.shape} for layers of "
+                f"shape {observed.shape}; it must be element-wise"
+            )
+        _score(np.ascontiguousarray(confidence), ties, object_rows, object_cols, hits[r])
+    return hits
 
 
 def run_trial(config: SweepConfig, pfp: float, pfn: float, trial: int) -> np.ndarray:
-    """Successes (len(KERNEL_RULES), len(checkpoints)) of one trial, as booleans."""
-    draws = draw_trial(config, trial_rng(config.seed, pfp, pfn, trial))
-    fired_weight, silent_weight = logodds_weights(pfp, pfn)
-    return _run_trial(
-        config.grid, config.supersample, config.fov, config.wedges, draws.object_row,
-        draws.object_col, draws.x, draws.y, draws.yaw, draws.fire, draws.tie,
-        np.asarray(config.checkpoints, dtype=np.int64), pfp, pfn, fired_weight, silent_weight,
-        config.min_observed,
-    )  # fmt: skip
+    """Successes (len(config.fusion), len(checkpoints)) of one trial, as booleans."""
+    rules = sweep_rules(config, pfp, pfn)
+    layer_weights, layer_of = evidence_layers(rules)
+    batch = _run_batch(config, pfp, pfn, range(trial, trial + 1), rules, layer_weights, layer_of)
+    return batch[:, 0]
 
 
 def run_trials(config: SweepConfig, pfp: float, pfn: float, start: int, stop: int) -> np.ndarray:
-    """Summed successes (len(KERNEL_RULES), len(checkpoints)) of trials start..stop-1."""
-    successes = np.zeros((len(KERNEL_RULES), len(config.checkpoints)), dtype=np.int64)
-    for trial in range(start, stop):
-        successes += run_trial(config, pfp, pfn, trial)
+    """Summed successes (len(config.fusion), len(checkpoints)) of trials start..stop-1."""
+    rules = sweep_rules(config, pfp, pfn)
+    layer_weights, layer_of = evidence_layers(rules)
+    successes = np.zeros((len(rules), len(config.checkpoints)), dtype=np.int64)
+    size = _batch_size(config, len(layer_weights))
+    for first in range(start, stop, size):
+        trials = range(first, min(first + size, stop))
+        hits = _run_batch(config, pfp, pfn, trials, rules, layer_weights, layer_of)
+        successes += hits.sum(axis=1)
     return successes
 
 
@@ -281,7 +395,7 @@ def run_setting(config: SweepConfig, setting: tuple[float, float]) -> SettingRes
     """All trials of one (P_fp, P_fn) setting."""
     pfp, pfn = setting
     successes = run_trials(config, pfp, pfn, 0, config.trials)
-    return SettingResult(pfp, pfn, config.trials, config.checkpoints, successes)
+    return SettingResult(pfp, pfn, config.trials, config.checkpoints, config.fusion, successes)
 
 
 @dataclass(frozen=True)
@@ -303,7 +417,7 @@ class ChunkResult:
     """Summed successes of one chunk's trials; chunks of a setting add up to its result."""
 
     chunk: Chunk
-    successes: np.ndarray = field(repr=False)  # (len(KERNEL_RULES), len(checkpoints)) ints
+    successes: np.ndarray = field(repr=False)  # (len(fusion), len(checkpoints)) ints
 
 
 def run_chunk(config: SweepConfig, chunk: Chunk) -> ChunkResult:
@@ -349,7 +463,7 @@ def plan_chunks(
 
 def result_rows(config: SweepConfig, results: Sequence[SettingResult]) -> list[dict[str, object]]:
     """Rows of ``results.csv`` in a stable order: rule, P_fp, P_fn, views."""
-    rows = [row for result in results for row in result.rows(config.fusion)]
+    rows = [row for result in results for row in result.rows()]
     order = {rule: i for i, rule in enumerate(config.fusion)}
     return sorted(rows, key=lambda r: (order[r["fusion"]], r["pfp"], r["pfn"], r["views"]))
 
@@ -360,8 +474,9 @@ JOURNAL_NAME = "settings.jsonl"
 
 
 def _identity(config: SweepConfig) -> dict[str, object]:
-    """The parameters that decide a setting's result (the rules reported do not: all run)."""
+    """The parameters that decide a setting's result, and the rules its rows of successes are."""
     return {
+        "fusion": list(config.fusion),
         "trials": config.trials,
         "wedges": config.wedges,
         "fov": config.fov,
@@ -371,6 +486,21 @@ def _identity(config: SweepConfig) -> dict[str, object]:
         "min_observed": config.min_observed,
         "checkpoints": list(config.checkpoints),
     }
+
+
+def _refuse_journal_without_rules(path: Path) -> None:
+    """A journal written before sweeps ran only the named rules has no ``fusion`` in its
+    identity; its rows cannot be matched to rules, so it is refused with the remedy."""
+    try:
+        with path.open(encoding="utf-8") as handle:
+            recorded = json.loads(handle.readline())["sweep"]
+    except (OSError, KeyError, TypeError, json.JSONDecodeError):
+        return  # absent or not a sweep journal: JsonLinesJournal says so
+    if isinstance(recorded, dict) and "fusion" not in recorded:
+        raise InputError(
+            f"{path.parent} holds a sweep journal from an older twin that did not record its "
+            "rules; pass --fresh to run the sweep again, or choose another --out"
+        )
 
 
 DEFAULT_CHUNK_TRIALS = 250  # about 0.6 s of work per task at the default world: overhead < 1 %
@@ -395,8 +525,10 @@ class SweepJournal:
         self._journal: JsonLinesJournal | None = None
         if path is None:
             return
+        if not fresh:
+            _refuse_journal_without_rules(path)
         self._journal = JsonLinesJournal(path, "sweep", _identity(config), fresh)
-        shape = (len(KERNEL_RULES), len(config.checkpoints))
+        shape = (len(config.fusion), len(config.checkpoints))
         for entry in self._journal.entries:
             try:
                 start, stop = entry.get("trials", (0, config.trials))
@@ -424,8 +556,8 @@ class SweepJournal:
             return None
         total = np.sum([c.successes for c in chunks], axis=0, dtype=np.int64)
         del self.partial[setting]
-        done = SettingResult(setting[0], setting[1], self.config.trials,
-                             self.config.checkpoints, total)  # fmt: skip
+        config = self.config
+        done = SettingResult(*setting, config.trials, config.checkpoints, config.fusion, total)
         self.done[setting] = done
         return done
 

@@ -16,6 +16,11 @@ A rule only chooses the per-column weight and how the two sums are read as a con
   log((1 - P_fn) / P_fp) to its cells, a silent one log(P_fn / (1 - P_fp)) (negative evidence).
   Rates are clamped to [``RATE_EPS``, 1 - ``RATE_EPS``] so the weights stay finite.
 
+``read`` is element-wise: each output cell depends only on that cell's evidence and observed
+sums, so it accepts stacked layers of any shape (e.g. trials x checkpoints x rows x cols, as the
+Monte Carlo reads a whole chunk at once) and returns an array of that shape; it must not modify
+its inputs (several rules may read the same sums).
+
 The paper's rule is the reference; the others are measured against it (``twin montecarlo``).
 """
 
@@ -42,7 +47,11 @@ class FusionRule(Protocol):
         ...
 
     def read(self, evidence: np.ndarray, observed: np.ndarray) -> np.ndarray:
-        """The confidence map of a layer from its two sums."""
+        """The confidence map of a layer from its two sums.
+
+        Element-wise over arrays of any (equal) shape; returns that shape and leaves the inputs
+        unchanged.
+        """
         ...
 
     def params(self) -> dict[str, Any]:
