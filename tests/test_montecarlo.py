@@ -23,6 +23,7 @@ from twin.app.montecarlo import (
     sweep_rules,
     trial_rng,
 )
+from twin.app.plots import _diagonal_triangles, draw_figure3, draw_figure3_3d
 from twin.cli import main
 from twin.core import fusion
 from twin.core.errors import InputError
@@ -329,6 +330,7 @@ def test_command_writes_the_csv_and_figure(tmp_path, capsys):
     for r in rows:
         assert float(r["success_rate"]) == int(r["successes"]) / int(r["trials"])
     assert (out / "figure3.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert not (out / "figure3_3d.png").exists()  # one P_fn: curves, no surface
     printed = capsys.readouterr().out
     assert "accumulate" in printed and "logodds" in printed
     assert main(argv) == 0  # a finished sweep in the same folder is reused, not refused
@@ -353,3 +355,83 @@ def test_command_rejects_malformed_lists_in_one_line(capsys):
         main(["montecarlo", "--views", "ten"])
     assert exit_info.value.code == 2
     assert "comma-separated list of view counts" in capsys.readouterr().err
+
+
+def test_command_writes_heat_maps_and_surfaces_when_both_rates_vary(tmp_path, capsys):
+    out = tmp_path / "mc"
+    argv = ["montecarlo", "--pfp", "0,0.5", "--pfn", "0,0.5", "--views", "3", "--trials", "2",
+            "--workers", "1", "--out", str(out)]  # fmt: skip
+    assert main(argv) == 0
+    printed = capsys.readouterr().out
+    for name in ("figure3.png", "figure3_3d.png"):
+        assert (out / name).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+        assert str(out / name) in printed
+
+
+FIGURE_RULES, FIGURE_VIEWS = ("accumulate", "logodds"), (10, 150)
+FIGURE_PFP, FIGURE_PFN = (0.0, 0.5, 1.0), (0.0, 0.3)
+
+
+def figure_rows(pfn=FIGURE_PFN):
+    """Rows as results.csv holds them, each success rate distinct: 3 * k % for the k-th row."""
+    rows = []
+    for rule in FIGURE_RULES:
+        for pfp in FIGURE_PFP:
+            for fn in pfn:
+                for views in FIGURE_VIEWS:
+                    k = len(rows)
+                    rows.append({"fusion": rule, "pfp": pfp, "pfn": fn, "views": views,
+                                 "trials": 100, "successes": 3 * k,
+                                 "success_rate": 3 * k / 100})  # fmt: skip
+    return rows
+
+
+def test_figure3_is_one_heat_map_per_rule_and_view_count_with_every_number_printed():
+    rows = figure_rows()
+    fig = draw_figure3(rows, FIGURE_RULES, FIGURE_PFP, FIGURE_PFN, FIGURE_VIEWS)
+    panels = [ax for ax in fig.axes if ax.images]
+    assert len(panels) == len(FIGURE_RULES) * len(FIGURE_VIEWS)
+    for ax, (rule, views) in zip(
+        panels, [(r, v) for r in FIGURE_RULES for v in FIGURE_VIEWS], strict=True
+    ):
+        assert ax.images[0].get_clim() == (0.0, 100.0)
+        expected = sorted(
+            f"{100 * r['success_rate']:.0f}"
+            for r in rows
+            if r["fusion"] == rule and r["views"] == views
+        )
+        assert sorted(t.get_text() for t in ax.texts) == expected
+        assert rule in ax.get_title() and str(views) in ax.get_title()
+    assert any("success" in ax.get_ylabel() for ax in fig.axes if not ax.images)  # colour bar
+
+
+def test_figure3_falls_back_to_curves_when_one_rate_axis_is_fixed():
+    rows = figure_rows(pfn=(0.2,))
+    fig = draw_figure3(rows, FIGURE_RULES, FIGURE_PFP, (0.2,), FIGURE_VIEWS)
+    assert not any(ax.images for ax in fig.axes)
+    curves = [ax.lines[0].get_xdata() for ax in fig.axes]
+    assert len(curves) == 4 and all(list(x) == list(FIGURE_PFP) for x in curves)
+    assert draw_figure3_3d(rows, FIGURE_RULES, FIGURE_PFP, (0.2,), FIGURE_VIEWS) is None
+
+
+def test_figure3_3d_draws_each_surface_as_flat_triangles():
+    fig = draw_figure3_3d(figure_rows(), FIGURE_RULES, FIGURE_PFP, FIGURE_PFN, FIGURE_VIEWS)
+    surfaces = [ax for ax in fig.axes if hasattr(ax, "get_zlim")]
+    assert len(surfaces) == len(FIGURE_RULES) * len(FIGURE_VIEWS)
+    cells = (len(FIGURE_PFP) - 1) * (len(FIGURE_PFN) - 1)
+    fig.canvas.draw()  # mplot3d projects (and depth-sorts) its polygons when drawn
+    for ax in surfaces:
+        (collection,) = ax.collections
+        polygons = collection.get_paths()
+        assert len(polygons) == 2 * cells
+        assert all(len(np.unique(path.vertices, axis=0)) == 3 for path in polygons)
+
+
+def test_surface_cells_are_cut_along_the_diagonal_across_the_line_of_sight():
+    triangles = _diagonal_triangles(3, 2)  # vertices 0 1 2 / 3 4 5, two cells
+    assert len(triangles) == 4
+    for i in range(2):  # cell i: corners i, i + 1, i + 4, i + 3
+        cut = {i + 1, i + 3}
+        halves = [set(t) for t in triangles if set(t) <= {i, i + 1, i + 3, i + 4}]
+        assert halves == [{i, i + 1, i + 3}, {i + 1, i + 4, i + 3}]
+        assert halves[0] & halves[1] == cut

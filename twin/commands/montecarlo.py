@@ -35,7 +35,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "montecarlo",
         help="reproduce the paper's Monte Carlo evaluation (Figure 3)",
         description="Monte Carlo over detector false-positive (P_fp) and false-negative (P_fn) "
-        "rates in the paper's abstract world; writes DIR/results.csv and DIR/figure3.png. "
+        "rates in the paper's abstract world; writes DIR/results.csv, DIR/figure3.png (heat "
+        "maps with the numbers) and DIR/figure3_3d.png (the paper's surfaces). "
         "Finished chunks of trials are journaled in DIR/settings.jsonl as they arrive: a sweep "
         "interrupted in DIR continues where it stopped when run again.",
     )
@@ -55,7 +56,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument(
         "--fusion", type=comma_list(str, "rule names"),
         default=("accumulate", "normalized", "logodds"),
-        help="rules to report: accumulate (the paper's), normalized, logodds (default: all)",
+        help="fusion rules to run (twin.core.fusion's: accumulate, the paper's, normalized, "
+        "logodds, or any rule registered there; default: those three)",
     )  # fmt: skip
     parser.add_argument(
         "--min-observed", type=float, default=1.0,
@@ -87,7 +89,7 @@ def run(args: argparse.Namespace) -> int:
         run_sweep,
         write_results_csv,
     )
-    from twin.app.plots import figure3
+    from twin.app.plots import figure3, figure3_3d
     from twin.core.errors import InputError
 
     config = SweepConfig(
@@ -121,12 +123,14 @@ def run(args: argparse.Namespace) -> int:
         executor.close()
     rows = result_rows(config, results)
     csv_path = write_results_csv(args.out / "results.csv", rows)
-    fig_path = figure3(
-        args.out / "figure3.png", rows, config.fusion, config.pfp, config.pfn, config.checkpoints
-    )
+    drawn = (rows, config.fusion, config.pfp, config.pfn, config.checkpoints)
+    written = [csv_path, figure3(args.out / "figure3.png", *drawn)]
+    surfaces = figure3_3d(args.out / "figure3_3d.png", *drawn)  # None: a single rate varies
+    if surfaces is not None:
+        written.append(surfaces)
     if not args.quiet:
         print(summary_table(rows, config))
-        print(f"wrote {csv_path} and {fig_path}")
+        print(f"wrote {', '.join(str(p) for p in written)}")
     return 0
 
 
