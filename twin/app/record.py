@@ -1,50 +1,79 @@
-"""What a survey shows in the Rerun viewer: the room, the robot, its eyes, wedges and grids.
+"""What a survey shows in the Rerun viewer: the grid from above, the room, the robot's eyes.
 
-Entity layout (map frame, metres, z up):
+The layout (sent with ``begin``, when the objects and the room are known):
 
-* ``world/room`` — the room outline and furniture boxes (static);
-* ``world/truth/<object>`` — where the objects really are (simulation only, static);
-* ``world/robot`` — the base pose per view; ``world/path`` — the path so far;
-* ``world/robot/camera`` — the camera at its pan and height: a Pinhole with the frame and the
-  patch scores drawn over it as coloured boxes (``.../image/scores/<object>``);
-* ``world/wedges/<object>`` — this view's wedges on the floor, coloured by column value;
-* ``world/grid/<object>`` — the accumulator layer as a GridMap, updated every view;
-* ``world/estimate/<object>`` — the current best peak; ``plots/peak/<object>`` — its value.
+* a large top-down panel per object (``top``; a Spatial2DView): the accumulator layer drawn with
+  north (map +y) up, on a colour scale fixed for the whole run with its colour bar, the room
+  and furniture outlines, metre ticks, the path so far, the robot, the estimate and (sim) the
+  truth;
+* the 3-D room (``world``): furniture boxes, the robot with its camera frustum, this view's
+  wedges cut at the room's walls, the layer on the floor; the eye is framed on the room;
+* the camera (``world/robot/camera``): the frame with the patch scores as a translucent heat
+  overlay (one SegmentationImage per object; hovering a patch shows its score);
+* time series per object: the best peak's value and the first/second peak ratio (``plots``).
 
-Timelines: ``view`` (sequence) and ``robot_time`` (seconds on the robot's clock). Camera frames
-are JPEG-compressed and the viewer gets a memory limit, so long runs stay bounded.
+Map frame as everywhere: x right, y up, metres. The 2-D panel draws its children of
+``top/map`` through a transform that flips y, because a 2-D view draws +y downwards (image
+rows); the layer is a DepthImage (row 0 = ``y_min``) placed by a transform of cell size and
+corner, so its hover readout is the layer's value. The floor layer in the 3-D view is a GridMap,
+which draws row 0 at the top: it gets the layer upside down.
+
+Timelines: ``view`` (sequence) and ``robot_time`` (seconds on the robot's clock). Everything that
+changes is logged per view (the path too: at view k it has k+1 points), so scrubbing back shows
+the run as it was. Camera frames are JPEG-compressed and viewers get a memory limit.
 """
 
 from __future__ import annotations
 
+import atexit
+import contextlib
 import math
+import os
+import signal
 import socket
 import subprocess
 import sys
+import tempfile
 import time
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Protocol
+from typing import Any, Protocol
 
 import numpy as np
 
 from twin.core.devices import View
 from twin.core.errors import TwinError
+from twin.core.fusion import FusionRule
 from twin.core.geometry import CameraModel, Footprint, Pose2D
 from twin.core.grid import AccumulatorGrid
 
 VIEWER_MEMORY_LIMIT = "1GiB"
 JPEG_QUALITY = 85
-WEDGE_DRAW_RANGE = 8.0  # metres; wedges are drawn to this length, then clipped by the eye
+SERVER_START_TIMEOUT = 10.0  # seconds for the Rerun server to listen
+SERVER_STOP_TIMEOUT = 5.0  # seconds between SIGTERM and SIGKILL for the server's group
+VIEWER_FLUSH_TIMEOUT = 10.0  # seconds a viewer may take to accept a view before it is left behind
+STRONG_MATCH = 0.5  # an RFCH score that is a clear detection (rendered frames rarely pass it)
+SCORE_LEVELS = 32  # steps of the camera's score overlay, from 0 to STRONG_MATCH
+SCORE_ALPHA = 190  # overlay opacity (of 255) from STRONG_MATCH up; a patch scoring 0 is clear
+VIEWS_PER_SWEEP = 8  # views in a full turn of a 45-degree camera; see colour_scale
+ESTIMATE_SQUARE = 0.15  # metres: half the side of the estimate's square in the top-down panel
+TRUTH_RING = 0.25  # metres: radius of the truth's ring in the top-down panel
+MAP = "top/map"  # the top-down panel's map frame (y flipped for the 2-D view)
 
 
 @dataclass(frozen=True)
 class SceneInfo:
-    """What a map of the room holds, for drawing: outline, furniture, and (sim) ground truth."""
+    """What a map of the room holds, for drawing: outline, furniture, and (sim) ground truth.
+
+    ``peak_separation`` (metres) is the one the results use for their first/second peak ratio,
+    so that the plotted ratio is the reported one.
+    """
 
     extent: tuple[float, float, float, float]
     furniture: tuple[Footprint, ...] = ()
     truth: dict[str, tuple[float, float, float]] = field(default_factory=dict)
+    peak_separation: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -61,7 +90,9 @@ class ViewRecord:
     scores: dict[str, np.ndarray]  # object -> (rows, cols) in [0, 1]
     wedges: np.ndarray  # (cols, 2) bearing intervals, radians, map frame
     column_values: dict[str, np.ndarray]  # object -> (cols,)
-    path: tuple[tuple[float, float, float], ...] = ()  # (x, y, yaw) of every view so far
+    # (x, y, yaw) of every view so far, this one included (without it, it is added); empty:
+    # the recorder draws the views it has seen itself
+    path: tuple[tuple[float, float, float], ...] = ()
     truth_pose: Pose2D | None = None  # simulation only: where the base really stood
 
 
@@ -106,8 +137,12 @@ class NullRecorder:
         pass
 
 
-def heat_colors(values: np.ndarray, alpha: int | None = None) -> np.ndarray:
-    """RGB(A) uint8 colours of values in [0, 1] on a dark-blue→yellow ramp (like viridis)."""
+# -- pure helpers (tested without a viewer) ---------------------------------------------------
+
+
+def heat_colors(values: np.ndarray, alpha: int | np.ndarray | None = None) -> np.ndarray:
+    """RGB(A) uint8 colours of values in [0, 1] on a dark-blue→yellow ramp (like viridis);
+    ``alpha`` (0..255) is one number or one per value."""
     stops = np.array([[68, 1, 84], [59, 82, 139], [33, 145, 140], [94, 201, 98], [253, 231, 37]])
     v = np.clip(np.asarray(values, dtype=float), 0.0, 1.0) * (len(stops) - 1)
     lo = np.floor(v).astype(int).clip(0, len(stops) - 2)
@@ -115,7 +150,154 @@ def heat_colors(values: np.ndarray, alpha: int | None = None) -> np.ndarray:
     rgb = ((1 - t) * stops[lo] + t * stops[lo + 1]).round().astype(np.uint8)
     if alpha is None:
         return rgb
-    return np.concatenate([rgb, np.full((*rgb.shape[:-1], 1), alpha, np.uint8)], axis=-1)
+    a = np.broadcast_to(np.asarray(alpha), rgb.shape[:-1]).astype(np.uint8)[..., None]
+    return np.concatenate([rgb, a], axis=-1)
+
+
+def nice_ceil(value: float) -> float:
+    """The smallest of 1, 2, 2.5, 5 times a power of ten that is >= ``value`` (> 0)."""
+    power = 10.0 ** math.floor(math.log10(value))
+    for step in (1.0, 2.0, 2.5, 5.0, 10.0):
+        if step * power >= value * (1.0 - 1e-12):
+            return step * power
+    return 10.0 * power  # not reached: 10 * power >= value always
+
+
+@dataclass(frozen=True)
+class ColourScale:
+    """A layer's colour scale, fixed for a run: ``lo``..``hi`` (layer units) span the colormap,
+    values beyond saturate at its ends."""
+
+    lo: float
+    hi: float
+    colormap: str  # a Rerun colormap name
+
+    def unit(self, layer: np.ndarray) -> np.ndarray:
+        """Values mapped to [0, 1] along the scale, saturated."""
+        return np.clip((np.asarray(layer, dtype=float) - self.lo) / (self.hi - self.lo), 0.0, 1.0)
+
+    def to_u8(self, layer: np.ndarray) -> np.ndarray:
+        """Values as 0..255 along the scale (a GridMap's colormap spans 0..255 for u8 data)."""
+        return np.rint(255.0 * self.unit(layer)).astype(np.uint8)
+
+    def describe(self) -> str:
+        return f"colour {self.lo:g} to {self.hi:g}, saturating beyond"
+
+
+def colour_scale(rule: FusionRule, planned_views: int) -> ColourScale:
+    """The fixed colour scale of a layer fused by ``rule`` over ``planned_views`` views.
+
+    A camera with a 45-degree field of view sees a given cell in about one of the
+    ``VIEWS_PER_SWEEP`` views of a full turn, so a mission holds ``planned_views / 8`` looks at
+    the object. ``accumulate`` adds a column's match per look: the top of the scale is a strong
+    match (``STRONG_MATCH``) at every look; ``normalized`` is a mean match, 0 to a strong one;
+    ``logodds`` is symmetric about 0, its top what a detector with the rule's miss rate gathers
+    at every look. Tops are rounded up to 1, 2, 2.5 or 5 times a power of ten.
+    """
+    looks = max(1.0, planned_views / VIEWS_PER_SWEEP)
+    if rule.name == "normalized":
+        return ColourScale(0.0, STRONG_MATCH, "viridis")
+    if rule.name == "logodds":
+        fired = float(getattr(rule, "fired_weight", 1.0))
+        silent = float(getattr(rule, "silent_weight", 0.0))
+        missed = float(getattr(rule, "p_fn", 0.0))
+        top = nice_ceil(max(1.0, looks * ((1.0 - missed) * fired + missed * silent)))
+        return ColourScale(-top, top, "cyantoyellow")
+    return ColourScale(0.0, nice_ceil(STRONG_MATCH * looks), "viridis")
+
+
+def clip_to_rect(polygon: np.ndarray, extent: tuple[float, float, float, float]) -> np.ndarray:
+    """The part of a convex polygon ((n, 2) metres) inside the rectangle ``extent``
+    (x0, y0, x1, y1), as an (m, 2) array (m = 0 when they do not meet); Sutherland-Hodgman."""
+    x0, y0, x1, y1 = extent
+    points = [tuple(p) for p in np.asarray(polygon, dtype=float)]
+    for axis, bound, sign in ((0, x0, 1.0), (0, x1, -1.0), (1, y0, 1.0), (1, y1, -1.0)):
+        kept: list[tuple[float, float]] = []
+        for i, current in enumerate(points):
+            previous = points[i - 1]
+            inside_now = sign * (current[axis] - bound) >= 0.0
+            inside_before = sign * (previous[axis] - bound) >= 0.0
+            if inside_now != inside_before:
+                t = (bound - previous[axis]) / (current[axis] - previous[axis])
+                kept.append(
+                    (
+                        previous[0] + t * (current[0] - previous[0]),
+                        previous[1] + t * (current[1] - previous[1]),
+                    )
+                )
+            if inside_now:
+                kept.append(current)
+        points = kept
+        if not points:
+            break
+    return np.array(points, dtype=float).reshape(-1, 2)
+
+
+def wedge_polygons(
+    origin: tuple[float, float], wedges: np.ndarray, extent: tuple[float, float, float, float]
+) -> list[np.ndarray]:
+    """Each bearing interval [a0, a1] (radians) from ``origin`` cut at the room's walls, as a
+    convex polygon in metres (empty where the wedge misses the room). Wedges wider than 120
+    degrees are split so that the triangle's far edge stays beyond the walls."""
+    x0, y0, x1, y1 = extent
+    ox, oy = origin
+    reach = 2.0 * math.hypot(x1 - x0, y1 - y0) + math.hypot(
+        max(x0 - ox, ox - x1, 0.0), max(y0 - oy, oy - y1, 0.0)
+    )
+    out = []
+    for a0, a1 in np.asarray(wedges, dtype=float):
+        pieces = max(1, math.ceil((a1 - a0) / math.radians(120.0)))
+        angles = np.linspace(a0, a1, pieces + 1)
+        rim = [(ox + reach * math.cos(a), oy + reach * math.sin(a)) for a in angles]
+        out.append(clip_to_rect(np.array([(ox, oy), *rim]), extent))
+    return out
+
+
+def score_levels(boxes: np.ndarray, scores: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
+    """(height, width) uint8 class ids 0..SCORE_LEVELS: every pixel's highest patch score
+    (patches overlap when the stride is smaller than the patch), in steps of
+    STRONG_MATCH / SCORE_LEVELS, saturating at STRONG_MATCH."""
+    height, width = shape
+    unit = np.clip(np.asarray(scores, float) / STRONG_MATCH, 0.0, 1.0)
+    levels = np.rint(unit * SCORE_LEVELS).astype(np.uint8)
+    out = np.zeros((height, width), np.uint8)
+    for (bx0, by0, bx1, by1), level in zip(
+        np.asarray(boxes).reshape(-1, 4), levels.reshape(-1), strict=True
+    ):
+        region = out[max(by0, 0) : min(by1, height), max(bx0, 0) : min(bx1, width)]
+        np.maximum(region, level, out=region)
+    return out
+
+
+def path_points(record: ViewRecord, seen: list[tuple[float, float]]) -> list[tuple[float, float]]:
+    """The (x, y) of every view up to and including ``record``'s: the record's path when it
+    carries one (with this view added if it lacks it), else ``seen``, the views this recorder
+    logged, which gets this view appended."""
+    pose = record.view.pose
+    if not record.path:
+        seen.append((pose.x, pose.y))
+        return list(seen)
+    points = [(float(p[0]), float(p[1])) for p in record.path]
+    if len(points) == record.index:
+        points.append((pose.x, pose.y))
+    return points
+
+
+def _score_label(level: int) -> str:
+    score = level * STRONG_MATCH / SCORE_LEVELS
+    return f"score >= {score:.2f}" if level == SCORE_LEVELS else f"score {score:.2f}"
+
+
+def has_display() -> bool:
+    """Whether a native viewer window can open (on Linux/BSD: an X11 or Wayland display)."""
+    if sys.platform.startswith(("linux", "freebsd", "openbsd", "netbsd")):
+        return bool(os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"))
+    return True
+
+
+def _ring(x: float, y: float, radius: float) -> np.ndarray:
+    angles = np.linspace(0.0, 2.0 * math.pi, 33)
+    return np.stack([x + radius * np.cos(angles), y + radius * np.sin(angles)], axis=1)
 
 
 def _free_port() -> int:
@@ -124,11 +306,71 @@ def _free_port() -> int:
         return probe.getsockname()[1]
 
 
+def _rerun_command() -> list[str]:
+    """The bundled viewer binary itself, not the ``python -m rerun`` wrapper: the wrapper runs it
+    as a child that a signal to the wrapper orphans."""
+    try:
+        import rerun_cli
+    except ImportError:
+        return [sys.executable, "-m", "rerun"]
+    override = os.environ.get("RERUN_CLI_PATH")
+    folder = Path(rerun_cli.__file__).parent
+    suffix = ".exe" if sys.platform.startswith("win") else ""
+    for candidate in (
+        Path(override) if override else None,
+        folder / "Rerun.app" / "Contents" / "MacOS" / "Rerun",
+        folder / f"rerun{suffix}",
+    ):
+        if candidate is not None and candidate.is_file():
+            return [str(candidate)]
+    return [sys.executable, "-m", "rerun"]
+
+
+def _die_with_parent() -> Callable[[], None] | None:
+    """On Linux, a pre-exec hook that has the kernel SIGTERM the child when this process dies
+    (even by SIGKILL), so that a killed survey leaves no server behind."""
+    if not sys.platform.startswith("linux"):
+        return None
+    import ctypes
+
+    libc = ctypes.CDLL(None, use_errno=True)
+    parent = os.getpid()
+    pr_set_pdeathsig = 1
+
+    def arm() -> None:
+        libc.prctl(pr_set_pdeathsig, int(signal.SIGTERM), 0, 0, 0)
+        if os.getppid() != parent:  # the parent died before the hook was armed
+            os._exit(1)
+
+    return arm
+
+
+def _fsync(path: Path) -> None:
+    """Push a file's written bytes from the page cache to the disk."""
+    try:
+        fd = os.open(path, os.O_RDONLY)
+    except FileNotFoundError:
+        return
+    try:
+        os.fsync(fd)
+    except OSError as exc:
+        raise TwinError(f"could not write the recording {path}: {exc.strerror}") from None
+    finally:
+        os.close(fd)
+
+
+# -- the recorder ---------------------------------------------------------------------------------
+
+
 class RerunRecorder:
     """Logs a survey to Rerun: ``save`` to an .rrd file, ``spawn`` a viewer, or ``serve`` gRPC.
 
-    ``serve`` starts the ``rerun`` server bound to ``bind`` (localhost unless told otherwise;
-    the SDK's own server would listen on every interface) and prints the URL to connect to.
+    ``serve`` starts the bundled ``rerun`` server bound to ``bind`` (localhost unless told
+    otherwise), in its own process group so that a Ctrl-C meant for the survey does not reach
+    it, and prints the URL to connect to; ``wait`` serves until Ctrl-C, ``end`` stops it when the
+    mission did not finish (``wait`` will not come), and on Linux it dies with this process.
+    ``spawn`` without a display (Linux: no DISPLAY or WAYLAND_DISPLAY) saves to ``path`` instead
+    and says so in one line.
     """
 
     def __init__(
@@ -142,33 +384,192 @@ class RerunRecorder:
     ) -> None:
         import rerun as rr
 
+        if mode not in ("save", "spawn", "serve"):
+            raise TwinError(f"unknown Rerun mode {mode!r}; use save, spawn, serve or off")
+        if mode == "spawn" and not has_display():
+            if path is None:
+                raise TwinError(
+                    "no display for a Rerun viewer (DISPLAY and WAYLAND_DISPLAY are unset); "
+                    "use --rerun save or serve"
+                )
+            print(f"no display for a Rerun viewer: saving the recording to {path}", flush=True)
+            mode = "save"
         self._rr = rr
         self.mode = mode
         self.url: str | None = None
+        self.file: Path | None = None
         self._server: subprocess.Popen[bytes] | None = None
+        self._viewer_lagging = False
+        self._seen: list[tuple[float, float]] = []
+        self._scales: dict[str, ColourScale] = {}
+        self._peak_separation = 0.0
+        self._planned = 0  # views the mission plans (from begin) and the last one logged
+        self._last_view = -1
         self.stream = rr.RecordingStream(application_id, recording_id=recording_id)
-        blueprint = self._blueprint()
         if mode == "save":
             if path is None:
                 raise TwinError("Rerun 'save' mode needs a file path")
             path.parent.mkdir(parents=True, exist_ok=True)
-            self.stream.save(path, default_blueprint=blueprint)
+            self.file = path
+            self.stream.save(path)
         elif mode == "spawn":
-            self.stream.spawn(memory_limit=VIEWER_MEMORY_LIMIT, default_blueprint=blueprint)
-        elif mode == "serve":
-            self.url = self._start_server(bind, port or _free_port())
-            self.stream.connect_grpc(self.url, default_blueprint=blueprint)
+            self.stream.spawn(memory_limit=VIEWER_MEMORY_LIMIT)
         else:
-            raise TwinError(f"unknown Rerun mode {mode!r}; use save, spawn, serve or off")
-        self._path: list[tuple[float, float]] = []
+            self.url = self._start_server(bind, port or _free_port())
+            self.stream.connect_grpc(self.url)
+
+    # -- the Recorder protocol ---------------------------------------------------------------
+
+    def begin(self, scene: SceneInfo, grid: AccumulatorGrid, planned_views: int) -> None:
+        rr, log = self._rr, self.stream.log
+        self._extent = tuple(float(v) for v in scene.extent)
+        self._peak_separation = scene.peak_separation
+        self._planned = planned_views
+        self._scales = {name: colour_scale(grid.rule, planned_views) for name in grid.objects}
+        self.stream.send_blueprint(self._blueprint(scene, grid), make_active=True)
+        log("world", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
+        log(MAP, rr.Transform3D(scale=[1.0, -1.0, 1.0]), static=True)  # north up in 2-D
+        self._log_room(scene)
+        log(
+            "world/robot/body",
+            rr.Boxes3D(centers=[[0, 0, 0.6]], half_sizes=[[0.25, 0.2, 0.6]], colors=[90, 90, 200]),
+            static=True,
+        )
+        log(
+            "world/robot/camera/image/scores",
+            rr.AnnotationContext(
+                [
+                    (level, _score_label(level), tuple(int(c) for c in rgba))
+                    for level, rgba in enumerate(self._score_colours())
+                ]
+            ),
+            static=True,
+        )
+        spec = grid.spec
+        for name in grid.objects:
+            # Layer cells (row, col) to metres: the DepthImage pixel grid scaled and placed.
+            log(
+                f"{MAP}/objects/{name}/grid",
+                rr.Transform3D(
+                    translation=[spec.x_min, spec.y_min, 0.0],
+                    scale=[spec.cell_size, spec.cell_size, 1.0],
+                ),
+                static=True,
+            )
+            self._log_legend(name, spec.cell_size)
+            for metric in ("peak", "peak_ratio"):
+                log(f"plots/{metric}/{name}", rr.SeriesLines(names=name), static=True)
+            if name in scene.truth:
+                self._log_truth(name, scene.truth[name])
+
+    def log_view(self, record: ViewRecord, grid: AccumulatorGrid) -> None:
+        rr, log = self._rr, self.stream.log
+        self._last_view = record.index
+        self.stream.set_time("view", sequence=record.index)
+        self.stream.set_time("robot_time", duration=record.robot_time)
+        pose = record.view.pose
+        log(
+            "world/robot",
+            rr.Transform3D(
+                translation=[pose.x, pose.y, 0.0],
+                rotation_axis_angle=rr.RotationAxisAngle(axis=[0, 0, 1], radians=pose.yaw),
+            ),
+        )
+        path = path_points(record, self._seen)
+        log("world/path", rr.LineStrips3D([[[x, y, 0.01] for x, y in path]], colors=[90, 90, 200]))
+        log(
+            f"{MAP}/path",
+            rr.LineStrips2D([path], colors=[110, 170, 255], radii=0.025, draw_order=20.0),
+        )
+        heading = pose.yaw + record.view.pan
+        log(
+            f"{MAP}/robot",
+            rr.Arrows2D(
+                origins=[[pose.x, pose.y]],
+                vectors=[[0.45 * math.cos(heading), 0.45 * math.sin(heading)]],
+                radii=0.04,
+                colors=[110, 170, 255],
+                labels=["robot"],
+                show_labels=False,
+                draw_order=30.0,
+            ),
+        )
+        if record.truth_pose is not None:
+            truth = record.truth_pose
+            log(
+                f"{MAP}/robot_truth",
+                rr.Points2D(
+                    [[truth.x, truth.y]],
+                    radii=0.06,
+                    colors=[255, 160, 60],
+                    labels=["robot (truth)"],
+                    show_labels=False,
+                    draw_order=29.0,
+                ),
+            )
+        self._log_camera(record)
+        for name, values in record.column_values.items():
+            self._log_wedges(name, (pose.x, pose.y), record.wedges, values)
+        for name in grid.objects:
+            self._log_grid(name, grid)
+
+    def flush(self) -> None:
+        """Block until every view logged so far is in the file (and fsync'd), or sent to the
+        viewer; a viewer that takes nothing for ``VIEWER_FLUSH_TIMEOUT`` is left behind with one
+        printed line rather than stalling the mission."""
+        if self.file is not None:
+            self.stream.flush()  # the file writer has written every message when this returns
+            _fsync(self.file)
+            return
+        if self._viewer_lagging:
+            self.stream.flush(timeout_sec=0.0)
+            return
+        try:
+            self.stream.flush(timeout_sec=VIEWER_FLUSH_TIMEOUT)
+        except RuntimeError:  # the SDK's flush timed out (the viewer was closed, or hangs)
+            self._viewer_lagging = True
+            where = self.url or "the spawned viewer"
+            print(f"Rerun: {where} takes no data; the survey goes on without it", flush=True)
+
+    def end(self) -> None:
+        """Flush and close the recording (a .rrd gets its footer). When the mission did not
+        finish (an exception is on its way, or fewer views were logged than planned) it also
+        stops a ``serve`` server: ``wait`` is for finished runs only."""
+        finished = self._last_view >= 0 and self._last_view + 1 >= self._planned
+        interrupted = sys.exc_info()[0] is not None or not finished
+        try:
+            self.flush()
+            self.stream.disconnect()
+            if self.file is not None:
+                _fsync(self.file)
+        finally:
+            if interrupted:
+                self._stop_server()
+
+    def wait(self) -> None:
+        """In ``serve`` mode the server holds the recording for viewers until Ctrl-C."""
+        if self._server is None:
+            return
+        try:
+            print(
+                f"Rerun server serving the recording at {self.url}; stop it with Ctrl-C", flush=True
+            )
+            self._server.wait()
+        except KeyboardInterrupt:
+            print("Rerun server stopped", flush=True)
+        finally:
+            self._stop_server()
+
+    # -- the server ----------------------------------------------------------------------------
+
+    @property
+    def server_pid(self) -> int | None:
+        """The server's process id (its process group's too), while it runs."""
+        return self._server.pid if self._server is not None else None
 
     def _start_server(self, bind: str, port: int) -> str:
-        # The viewer binary ships in rerun-sdk: run it with this interpreter, so an
-        # unactivated virtual environment works too.
         command = [
-            sys.executable,
-            "-m",
-            "rerun",
+            *_rerun_command(),
             "--serve-grpc",
             "--bind",
             bind,
@@ -177,44 +578,118 @@ class RerunRecorder:
             "--server-memory-limit",
             VIEWER_MEMORY_LIMIT,
         ]
-        self._server = subprocess.Popen(command, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
         host = "127.0.0.1" if bind in ("0.0.0.0", "::", "127.0.0.1") else bind
-        deadline = time.monotonic() + 10.0
-        while time.monotonic() < deadline:
-            if self._server.poll() is not None:
-                raise TwinError(f"the Rerun server on {bind}:{port} exited; is the port taken?")
-            try:
-                with socket.create_connection((host, port), timeout=0.2):
-                    return f"rerun+http://{host}:{port}/proxy"
-            except OSError:
-                time.sleep(0.1)
-        self._server.terminate()
-        raise TwinError(f"the Rerun server on {bind}:{port} did not start within 10 s")
+        with tempfile.TemporaryFile() as log:
+            self._server = subprocess.Popen(
+                command,
+                stdin=subprocess.DEVNULL,
+                stdout=subprocess.DEVNULL,
+                stderr=log,
+                start_new_session=True,
+                preexec_fn=_die_with_parent(),
+            )
+            atexit.register(self._stop_server)
+            deadline = time.monotonic() + SERVER_START_TIMEOUT
+            while time.monotonic() < deadline:
+                if self._server.poll() is not None:
+                    self._stop_server()
+                    log.seek(0)
+                    said = log.read().decode(errors="replace").strip().splitlines()
+                    last = f" ({said[-1].strip()})" if said else ""
+                    raise TwinError(
+                        f"the Rerun server on {bind}:{port} exited{last}; is the port taken?"
+                    )
+                try:
+                    with socket.create_connection((host, port), timeout=0.2):
+                        return f"rerun+http://{host}:{port}/proxy"
+                except OSError:
+                    time.sleep(0.1)
+        self._stop_server()
+        raise TwinError(
+            f"the Rerun server on {bind}:{port} did not start within {SERVER_START_TIMEOUT:g} s"
+        )
 
-    def _blueprint(self):
+    def _stop_server(self) -> None:
+        """End the server's whole process group: SIGTERM, then SIGKILL if it lingers."""
+        server, self._server = self._server, None
+        if server is None:
+            return
+        atexit.unregister(self._stop_server)
+        if not hasattr(os, "killpg"):
+            server.terminate()
+            server.wait()
+            return
+        for sig in (signal.SIGTERM, signal.SIGKILL):
+            with contextlib.suppress(ProcessLookupError):
+                os.killpg(server.pid, sig)
+            try:
+                server.wait(timeout=SERVER_STOP_TIMEOUT)
+                break
+            except (subprocess.TimeoutExpired, KeyboardInterrupt):
+                continue
+        with contextlib.suppress(ProcessLookupError):  # anything the leader left behind
+            os.killpg(server.pid, signal.SIGKILL)
+
+    # -- layout ----------------------------------------------------------------------------------
+
+    def _blueprint(self, scene: SceneInfo, grid: AccumulatorGrid) -> Any:
         import rerun.blueprint as rrb
 
+        x0, y0, x1, y1 = self._extent
+        cx, cy = 0.5 * (x0 + x1), 0.5 * (y0 + y1)
+        size = max(x1 - x0, y1 - y0)
+        maps = [
+            rrb.Spatial2DView(
+                name=f"{name}: grid from above, {grid.rule.name}, {self._scales[name].describe()}",
+                origin="top",
+                contents=["+ /top/**", "- /top/map/objects/**", f"+ /top/map/objects/{name}/**"],
+                # The view's y is the map's -y (the flip at top/map); room for ticks and legend.
+                visual_bounds=rrb.VisualBounds2D(
+                    x_range=[x0 - 0.7, x1 + 1.5], y_range=[-(y1 + 0.6), -(y0 - 0.6)]
+                ),
+            )
+            for name in grid.objects
+        ]
+        room = rrb.Spatial3DView(
+            name="room",
+            origin="world",
+            eye_controls=rrb.EyeControls3D(
+                position=[cx, y0 - 0.3 * size, 0.85 * size],
+                look_target=[cx, cy, 0.0],
+                eye_up=[0.0, 0.0, 1.0],
+            ),
+        )
+        camera = rrb.Spatial2DView(name="camera and patch scores", origin="world/robot/camera")
+        plots = rrb.Horizontal(
+            rrb.TimeSeriesView(name="peak value", origin="plots/peak"),
+            rrb.TimeSeriesView(name="first / second peak", origin="plots/peak_ratio"),
+        )
+        left = maps[0] if len(maps) == 1 else rrb.Tabs(*maps)
         return rrb.Blueprint(
             rrb.Horizontal(
-                rrb.Spatial3DView(name="room", origin="world"),
-                rrb.Vertical(
-                    rrb.Spatial2DView(name="camera", origin="world/robot/camera"),
-                    rrb.TimeSeriesView(name="peak value", origin="plots"),
-                    row_shares=[2, 1],
-                ),
-                column_shares=[3, 2],
+                left,
+                rrb.Vertical(room, camera, plots, row_shares=[4, 3, 2]),
+                column_shares=[5, 4],
             ),
             collapse_panels=True,
         )
 
-    # -- the Recorder protocol ---------------------------------------------------------------
+    # -- pieces --------------------------------------------------------------------------------
 
-    def begin(self, scene: SceneInfo, grid: AccumulatorGrid, planned_views: int) -> None:
+    def _log_room(self, scene: SceneInfo) -> None:
         rr, log = self._rr, self.stream.log
-        log("world", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
-        x0, y0, x1, y1 = scene.extent
-        outline = [[x0, y0, 0], [x1, y0, 0], [x1, y1, 0], [x0, y1, 0], [x0, y0, 0]]
-        log("world/room/outline", rr.LineStrips3D([outline], colors=[200, 200, 200]), static=True)
+        x0, y0, x1, y1 = self._extent
+        outline = [[x0, y0], [x1, y0], [x1, y1], [x0, y1], [x0, y0]]
+        log(
+            "world/room/outline",
+            rr.LineStrips3D([[[x, y, 0.0] for x, y in outline]], colors=[200, 200, 200]),
+            static=True,
+        )
+        log(
+            f"{MAP}/room",
+            rr.LineStrips2D([outline], colors=[220, 220, 220], radii=0.03, draw_order=10.0),
+            static=True,
+        )
         for item in scene.furniture:
             lo, hi = item.polygon.min(axis=0), item.polygon.max(axis=0)
             log(
@@ -227,67 +702,139 @@ class RerunRecorder:
                 ),
                 static=True,
             )
-        for name, position in scene.truth.items():
+        if scene.furniture:
             log(
-                f"world/truth/{name}",
-                rr.Points3D(
-                    [position], radii=0.06, colors=[255, 60, 60], labels=[f"{name} (truth)"]
+                f"{MAP}/furniture",
+                rr.LineStrips2D(
+                    [np.vstack([f.polygon, f.polygon[:1]]) for f in scene.furniture],
+                    colors=[205, 170, 125],
+                    radii=0.02,
+                    labels=[f.name for f in scene.furniture],
+                    draw_order=11.0,
                 ),
                 static=True,
             )
-        for name in grid.objects:
-            log(f"plots/peak/{name}", rr.SeriesLines(names=name), static=True)
-
-    def log_view(self, record: ViewRecord, grid: AccumulatorGrid) -> None:
-        rr, log = self._rr, self.stream.log
-        view = record.view
-        self.stream.set_time("view", sequence=record.index)
-        self.stream.set_time("robot_time", duration=record.robot_time)
-        pose = view.pose
+        # Metre ticks along the bottom and left walls, and which way is north.
+        xs = range(math.ceil(x0), math.floor(x1) + 1)
+        ys = range(math.ceil(y0), math.floor(y1) + 1)
         log(
-            "world/robot",
-            rr.Transform3D(
-                translation=[pose.x, pose.y, 0.0],
-                rotation_axis_angle=rr.RotationAxisAngle(axis=[0, 0, 1], radians=pose.yaw),
+            f"{MAP}/ticks",
+            rr.LineStrips2D(
+                [[[x, y0], [x, y0 - 0.1]] for x in xs] + [[[x0, y], [x0 - 0.1, y]] for y in ys],
+                colors=[120, 120, 120],
+                radii=0.015,
+                draw_order=10.0,
             ),
-        )
-        log(
-            "world/robot/body",
-            rr.Boxes3D(centers=[[0, 0, 0.6]], half_sizes=[[0.25, 0.2, 0.6]], colors=[90, 90, 200]),
-        )
-        self._path.append((pose.x, pose.y))
-        # Static: only the newest path is kept, so a long run's memory grows linearly.
-        log(
-            "world/path",
-            rr.LineStrips3D([[[x, y, 0.01] for x, y in self._path]], colors=[90, 90, 200]),
             static=True,
         )
-        self._log_camera(record)
-        for name, values in record.column_values.items():
-            self._log_wedges(name, view, record.wedges, values)
-            self._log_grid(name, grid)
+        log(
+            f"{MAP}/ticks/labels",
+            rr.Points2D(
+                [[x, y0 - 0.28] for x in xs]
+                + [[x0 - 0.35, y] for y in ys]
+                + [[x0 - 0.35, y1 + 0.35]],
+                radii=0.001,
+                colors=[120, 120, 120],
+                labels=[f"{x} m" for x in xs] + [f"{y} m" for y in ys] + ["N ↑"],
+                draw_order=10.0,
+            ),
+            static=True,
+        )
 
-    def flush(self) -> None:
-        self.stream.flush()
+    def _log_truth(self, name: str, position: tuple[float, float, float]) -> None:
+        rr, log = self._rr, self.stream.log
+        log(
+            f"world/truth/{name}",
+            rr.Points3D([position], radii=0.06, colors=[255, 60, 60], labels=[f"{name} (truth)"]),
+            static=True,
+        )
+        log(
+            f"{MAP}/objects/{name}/truth",
+            rr.LineStrips2D(
+                [_ring(position[0], position[1], TRUTH_RING)],
+                colors=[255, 70, 70],
+                radii=0.03,
+                labels=["truth"],
+                show_labels=False,
+                draw_order=40.0,
+            ),
+            static=True,
+        )
 
-    def end(self) -> None:
-        self.stream.flush()
-        self.stream.disconnect()
+    def _log_legend(self, name: str, cell_size: float) -> None:
+        """Beside the room: a colour bar on the layer's scale with its ends and middle named,
+        and under it a key to the marks drawn on the map."""
+        rr, log = self._rr, self.stream.log
+        scale = self._scales[name]
+        _, y0, x1, y1 = self._extent
+        bottom = y0 + 0.4 * (y1 - y0)  # the bar's lower end; the key goes below
+        steps = 64
+        values = scale.lo + (np.arange(steps) + 0.5) / steps * (scale.hi - scale.lo)
+        bar = f"{MAP}/objects/{name}/legend"
+        log(
+            bar,
+            rr.Transform3D(
+                translation=[x1 + 0.35, bottom, 0.0], scale=[0.25, (y1 - bottom) / steps, 1.0]
+            ),
+            static=True,
+        )
+        log(
+            bar,
+            rr.DepthImage(
+                values.astype(np.float32)[:, None],
+                meter=1.0,
+                colormap=scale.colormap,
+                depth_range=[scale.lo, scale.hi],
+                draw_order=0.0,
+            ),
+            static=True,
+        )
+        label_x = x1 + 0.95
+        log(
+            f"{MAP}/objects/{name}/legend_labels",
+            rr.Points2D(
+                [
+                    [label_x, bottom],
+                    [label_x, 0.5 * (bottom + y1)],
+                    [label_x, y1],
+                    [x1 + 0.5, y1 + 0.3],
+                ],
+                radii=0.001,
+                colors=[120, 120, 120],
+                labels=[
+                    f"<= {scale.lo:g}" if scale.lo < 0 else f"{scale.lo:g}",
+                    f"{0.5 * (scale.lo + scale.hi):g}",
+                    f">= {scale.hi:g}",
+                    f"{name}, {cell_size:g} m cells",
+                ],
+                draw_order=10.0,
+            ),
+            static=True,
+        )
+        key_x, step = x1 + 0.5, 0.45
+        keys = [
+            ("truth (ring)", [255, 70, 70]),
+            ("estimate (white square)", [150, 150, 150]),
+            ("robot, path", [110, 170, 255]),
+            ("furniture", [205, 170, 125]),
+        ]
+        log(
+            f"{MAP}/objects/{name}/key",
+            rr.Points2D(
+                [[key_x, bottom - 0.45 - step * k] for k in range(len(keys))],
+                radii=0.07,
+                colors=[colour for _, colour in keys],
+                labels=[text for text, _ in keys],
+                draw_order=10.0,
+            ),
+            static=True,
+        )
 
-    def wait(self) -> None:
-        """In ``serve`` mode the server holds the recording for viewers until Ctrl-C."""
-        if self._server is None:
-            return
-        print(f"Rerun server serving the recording at {self.url}; stop it with Ctrl-C", flush=True)
-        try:
-            self._server.wait()
-        except KeyboardInterrupt:
-            pass
-        finally:
-            self._server.terminate()
-            self._server.wait(timeout=5)
-
-    # -- pieces --------------------------------------------------------------------------------
+    def _score_colours(self) -> np.ndarray:
+        # Opacity grows like the square root of the score: weak responses stay visible as a
+        # tint, strong ones cover the patch; the colour is the grid's (yellow = strong).
+        levels = np.arange(SCORE_LEVELS + 1) / SCORE_LEVELS
+        return heat_colors(levels, alpha=np.rint(SCORE_ALPHA * np.sqrt(levels)).astype(int))
 
     def _log_camera(self, record: ViewRecord) -> None:
         rr, log = self._rr, self.stream.log
@@ -310,68 +857,100 @@ class RerunRecorder:
                 image_plane_distance=0.5,
             ),
         )
+        image = record.view.image
         log(
             "world/robot/camera/image",
-            rr.Image(record.view.image, color_model="RGB").compress(jpeg_quality=JPEG_QUALITY),
+            rr.Image(image, color_model="RGB").compress(jpeg_quality=JPEG_QUALITY),
         )
-        boxes = record.patch_boxes.reshape(-1, 4)
         for name, scores in record.scores.items():
             log(
                 f"world/robot/camera/image/scores/{name}",
-                rr.Boxes2D(
-                    array=boxes,
-                    array_format=rr.Box2DFormat.XYXY,
-                    colors=heat_colors(scores.reshape(-1), alpha=110),
-                    radii=0.5,
+                rr.SegmentationImage(
+                    score_levels(record.patch_boxes, scores, image.shape[:2]),
+                    opacity=1.0,
                     draw_order=10.0,
                 ),
             )
 
-    def _log_wedges(self, name: str, view: View, wedges: np.ndarray, values: np.ndarray) -> None:
+    def _log_wedges(
+        self, name: str, origin: tuple[float, float], wedges: np.ndarray, values: np.ndarray
+    ) -> None:
         rr = self._rr
-        ox, oy = view.pose.x, view.pose.y
-        vertices, colors = [], []
-        for (a0, a1), value in zip(wedges, values, strict=True):
-            vertices += [
-                [ox, oy, 0.02],
-                [ox + WEDGE_DRAW_RANGE * math.cos(a0), oy + WEDGE_DRAW_RANGE * math.sin(a0), 0.02],
-                [ox + WEDGE_DRAW_RANGE * math.cos(a1), oy + WEDGE_DRAW_RANGE * math.sin(a1), 0.02],
-            ]
-            colors += [heat_colors(np.array([value]), alpha=int(40 + 150 * value))[0]] * 3
+        vertices: list[Sequence[float]] = []
+        colors: list[np.ndarray] = []
+        triangles: list[tuple[int, int, int]] = []
+        for polygon, value in zip(
+            wedge_polygons(origin, wedges, self._extent), values, strict=True
+        ):
+            if len(polygon) < 3:
+                continue
+            first = len(vertices)
+            colour = heat_colors(np.array([value]), alpha=int(40 + 150 * value))[0]
+            vertices += [[x, y, 0.02] for x, y in polygon]
+            colors += [colour] * len(polygon)
+            triangles += [(first, first + k, first + k + 1) for k in range(1, len(polygon) - 1)]
+        path = f"world/wedges/{name}"
+        if not triangles:
+            self.stream.log(path, rr.Clear(recursive=False))
+            return
         self.stream.log(
-            f"world/wedges/{name}", rr.Mesh3D(vertex_positions=vertices, vertex_colors=colors)
+            path,
+            rr.Mesh3D(vertex_positions=vertices, vertex_colors=colors, triangle_indices=triangles),
         )
 
     def _log_grid(self, name: str, grid: AccumulatorGrid) -> None:
-        rr = self._rr
+        rr, log = self._rr, self.stream.log
         layer = grid.layer(name)
-        top = float(layer.max())
-        low = float(layer.min())
-        scaled = (layer - low) / (top - low) if top > low else np.zeros_like(layer)
-        data = (255 * scaled).astype(np.uint8)
+        scale = self._scales[name]
         spec = grid.spec
-        self.stream.log(
+        # 3-D floor: a GridMap draws row 0 at the top (its translation is the lower-left corner).
+        log(
             f"world/grid/{name}",
             rr.GridMap(
-                data=data.tobytes(),
+                data=np.ascontiguousarray(np.flipud(scale.to_u8(layer))).tobytes(),
                 format=rr.components.ImageFormat(
                     width=spec.nx, height=spec.ny, color_model="L", channel_datatype="U8"
                 ),
                 cell_size=spec.cell_size,
                 translation=[spec.x_min, spec.y_min, 0.005],
-                colormap=rr.components.Colormap.Viridis,
+                colormap=scale.colormap,
                 opacity=0.8,
             ),
         )
-        best = grid.peaks(name, k=2)
-        peak = best.best
-        self.stream.log(
-            f"world/estimate/{name}",
-            rr.Points3D(
-                [[peak.x, peak.y, 0.05]],
-                radii=0.08,
-                colors=[255, 255, 255],
-                labels=[f"{name} estimate"],
+        # Top-down panel: the layer itself (row 0 = y_min) in cells, placed and flipped by the
+        # transforms; the viewer colours it on the fixed scale and shows the value on hover.
+        log(
+            f"{MAP}/objects/{name}/grid",
+            rr.DepthImage(
+                layer.astype(np.float32),
+                meter=1.0,
+                colormap=scale.colormap,
+                depth_range=[scale.lo, scale.hi],
+                draw_order=0.0,
             ),
         )
-        self.stream.log(f"plots/peak/{name}", rr.Scalars(peak.value))
+        peaks = grid.peaks(name, k=2, min_separation=self._peak_separation)
+        best = peaks.best
+        log(
+            f"world/estimate/{name}",
+            rr.Points3D(
+                [[best.x, best.y, 0.05]], radii=0.08, colors=[255, 255, 255], labels=["estimate"]
+            ),
+        )
+        # A hollow square around the estimate's cell, so that the cell itself stays visible.
+        half = ESTIMATE_SQUARE
+        corners = [(-1, -1), (1, -1), (1, 1), (-1, 1), (-1, -1)]
+        log(
+            f"{MAP}/objects/{name}/estimate",
+            rr.LineStrips2D(
+                [[[best.x + half * dx, best.y + half * dy] for dx, dy in corners]],
+                radii=0.02,
+                colors=[255, 255, 255],
+                labels=["estimate"],
+                show_labels=False,
+                draw_order=41.0,
+            ),
+        )
+        log(f"plots/peak/{name}", rr.Scalars(best.value))
+        if math.isfinite(peaks.ratio):
+            log(f"plots/peak_ratio/{name}", rr.Scalars(peaks.ratio))
