@@ -8,6 +8,9 @@ A packet is ``FA FB N data... CHK_hi CHK_lo``: N counts the data bytes plus the 
 bytes; ``data[0]`` is the command number (client to robot) or the packet type (robot to client).
 Integers in the data are little-endian, the checksum big-endian. Wire units (PeopleBot SH
 conversion factors, section B7): millimetres, mm/s, degrees, 4096ths of a turn, 0.1 V.
+
+The codec imports nothing of ``twin``: bytes it cannot decode raise ``PacketError``, which the
+driver turns into a ``ProtocolError`` naming the device (the emulator just counts them).
 """
 
 from __future__ import annotations
@@ -16,8 +19,6 @@ import math
 import struct
 from dataclasses import dataclass, field
 from enum import IntEnum
-
-from twin.core.devices import ProtocolError
 
 HEADER = b"\xfa\xfb"
 ARGINT, ARGNINT, ARGSTR = 0x3B, 0x1B, 0x2B
@@ -61,6 +62,16 @@ class Command(IntEnum):
     HOSTBAUD = 50
     AUX1BAUD = 51
     ESTOP = 55
+
+
+class PacketError(ValueError):
+    """Bytes that are not a valid packet: what the codec was ``doing``, what was wrong
+    (``seen``) and the ``remedy``; a driver adds its device's name to make the
+    ``ProtocolError`` the user sees."""
+
+    def __init__(self, doing: str, seen: str, remedy: str) -> None:
+        self.doing, self.seen, self.remedy = doing, seen, remedy
+        super().__init__(f"{doing}: {seen}; {remedy}")
 
 
 SIP_STOPPED, SIP_MOVING = 0x32, 0x33
@@ -129,7 +140,7 @@ class ClientCommand:
     arg: int | bytes | None
 
 
-def parse_command(data: bytes, device: str = "ARCOS robot") -> ClientCommand:
+def parse_command(data: bytes) -> ClientCommand:
     """Decode a client packet's data (checksum already verified)."""
     number, rest = data[0], data[1:]
     if not rest:
@@ -139,8 +150,7 @@ def parse_command(data: bytes, device: str = "ARCOS robot") -> ClientCommand:
         if len(rest) == 1:  # p2os sends SETO as '07 3B' with no value
             return ClientCommand(number, None)
         if len(rest) < 3:
-            raise ProtocolError(
-                device,
+            raise PacketError(
                 f"decode command {number}",
                 f"int argument of {len(rest) - 1} bytes",
                 "send 3B/1B and two bytes",
@@ -149,15 +159,13 @@ def parse_command(data: bytes, device: str = "ARCOS robot") -> ClientCommand:
         return ClientCommand(number, -value if kind == ARGNINT else value)
     if kind == ARGSTR:
         if len(rest) < 2 or len(rest) - 2 < rest[1]:
-            raise ProtocolError(
-                device,
+            raise PacketError(
                 f"decode command {number}",
                 "string argument shorter than its length byte",
                 "send 2B, length, then the bytes",
             )
         return ClientCommand(number, bytes(rest[2 : 2 + rest[1]]))
-    raise ProtocolError(
-        device,
+    raise PacketError(
         f"decode command {number}",
         f"argument type 0x{kind:02X}",
         "use 3B (int), 1B (negative int) or 2B (string)",
@@ -300,12 +308,11 @@ def is_sip(data: bytes) -> bool:
     return bool(data) and data[0] & 0xF0 == 0x30
 
 
-def parse_sip(data: bytes, device: str = "ARCOS base") -> Sip:
+def parse_sip(data: bytes) -> Sip:
     """Decode a SIP's data (type byte first, checksum removed); extra bytes beyond the ARCOS
     tail are ignored, as newer firmware appends fields."""
     if len(data) < _SIP_HEAD.size:
-        raise ProtocolError(
-            device,
+        raise PacketError(
             "decode a SIP",
             f"{len(data)} data bytes, fewer than {_SIP_HEAD.size}",
             "check the robot runs ARCOS/AROS firmware",
@@ -316,8 +323,7 @@ def parse_sip(data: bytes, device: str = "ARCOS base") -> Sip:
     pos = _SIP_HEAD.size
     need = pos + 3 * count + 5
     if len(data) < need:
-        raise ProtocolError(
-            device,
+        raise PacketError(
             "decode a SIP",
             f"{len(data)} data bytes for {count} sonar readings, need {need}",
             "check the serial line for lost bytes",
@@ -360,19 +366,17 @@ def xy_delta(old: int, new: int) -> int:
     return ((new - old + 0x4000) & XY_BITS) - 0x4000
 
 
-def parse_sync2(data: bytes, device: str = "ARCOS base") -> tuple[str, str, str]:
+def parse_sync2(data: bytes) -> tuple[str, str, str]:
     """SYNC2's reply: type 2 then three NUL-terminated strings (name, class, subclass)."""
     if not data or data[0] != 2:
-        raise ProtocolError(
-            device,
+        raise PacketError(
             "read the SYNC2 reply",
             f"packet type {data[:1].hex()}",
             "restart the handshake at SYNC0",
         )
     parts = bytes(data[1:]).split(b"\x00")
     if len(parts) < 4:
-        raise ProtocolError(
-            device,
+        raise PacketError(
             "read the SYNC2 reply",
             f"{len(parts) - 1} strings, not 3",
             "check the robot runs ARCOS/AROS firmware",
@@ -392,13 +396,12 @@ class PacketParser:
     """Splits a byte stream into packet data (type/command byte first, checksum removed).
 
     Junk before ``FA FB`` is skipped silently (ARIA writes ``WMS2\\r`` before syncing). A bad
-    checksum or an impossible byte count raises ``ProtocolError`` once, after dropping only
+    checksum or an impossible byte count raises ``PacketError`` once, after dropping only
     the header, so the next call resynchronises on the following ``FA FB``; a packet cut short
     stays pending until ``expire_partial`` declares it truncated.
     """
 
-    def __init__(self, device: str, max_count: int = 255) -> None:
-        self.device = device
+    def __init__(self, max_count: int = 255) -> None:
         self.max_count = max_count
         self._buf = bytearray()
 
@@ -425,8 +428,7 @@ class PacketParser:
         count = buf[2]
         if count < 3 or count > self.max_count:
             del buf[:2]
-            raise ProtocolError(
-                self.device,
+            raise PacketError(
                 "read a packet",
                 f"byte count {count} (allowed 3..{self.max_count})",
                 "check the baud rate and the cable",
@@ -437,8 +439,7 @@ class PacketParser:
         got = int.from_bytes(buf[1 + count : 3 + count], "big")
         if got != checksum(data):
             del buf[:2]
-            raise ProtocolError(
-                self.device,
+            raise PacketError(
                 "read a packet",
                 f"bad checksum 0x{got:04X} for a "
                 f"type 0x{data[0]:02X} packet (expected 0x{checksum(data):04X})",
@@ -448,7 +449,7 @@ class PacketParser:
         return data
 
     def expire_partial(self) -> None:
-        """Drop a pending unfinished packet's header, raising ``ProtocolError`` if there was
+        """Drop a pending unfinished packet's header, raising ``PacketError`` if there was
         one; bytes after it stay buffered (call ``next`` again: a whole packet may follow)."""
         start = self._buf.find(HEADER)
         if start < 0:
@@ -456,8 +457,7 @@ class PacketParser:
             return
         seen = len(self._buf) - start
         del self._buf[: start + 2]
-        raise ProtocolError(
-            self.device,
+        raise PacketError(
             "read a packet",
             f"truncated packet ({seen} bytes, then silence)",
             "check the cable; the packet was dropped",

@@ -21,7 +21,7 @@ from collections.abc import Callable
 
 from hardware import vcc4_codec as codec
 from hardware.transport import SerialTransport, Transport
-from hardware.vcc4_codec import ModeError
+from hardware.vcc4_codec import AnswerError
 from twin.core.devices import (
     VCC4_LIMITS,
     ConnectionLostError,
@@ -45,6 +45,54 @@ NAME = "VC-C4"
 # manual's full -30..+90 degrees, so the API's limits are the camera's (ARIA stops at +88).
 INIT_TILT_RANGE = codec.TILT_RANGE_MAX
 LIMITS = VCC4_LIMITS
+
+
+class ModeError(DeviceFaultError):
+    """The camera refused a command for its mode: local mode, camera off, or not initialised."""
+
+
+def error_for(flags: int, device: str, asked: str) -> DeviceError | None:
+    """The typed error an answer's flag byte means (``codec.answer_error``), or None for an ACK:
+    one line with the code on the wire, what it means here, and what to do."""
+    error = codec.answer_error(flags)
+    if error is None:
+        return None
+    code = codec.hex_digits(flags, 2).decode()
+    if error is AnswerError.MODE:
+        return ModeError(
+            device,
+            asked,
+            f"mode error (answer code {code}): not in host control "
+            "mode, camera off or pedestal not initialised",
+            "initialise the camera (twin hw vcc4 init, or reconnect)",
+        )
+    if error is AnswerError.COMMAND:
+        return ProtocolError(
+            device,
+            asked,
+            f"command error (answer code {code}): the camera does not know this command",
+            "check the camera model (VC-C4)",
+        )
+    if error is AnswerError.PARAMETER:
+        return OutOfRangeError(
+            device,
+            asked,
+            f"parameter error (answer code {code}): value outside the movable range",
+            "stay within the camera's limits",
+        )
+    if error is AnswerError.SYSTEM:
+        return DeviceFaultError(
+            device, asked, f"system error (answer code {code})", "power-cycle the camera"
+        )
+    if error is AnswerError.BUSY:
+        return DeviceBusyError(
+            device,
+            asked,
+            f"busy (answer code {code}): an earlier motion, "
+            "initialisation or power change is still running",
+            "wait for it to finish or stop the head",
+        )
+    return ProtocolError(device, asked, f"unknown answer code {code}", "check the cable")
 
 
 class VCC4(PanTilt):
@@ -88,7 +136,7 @@ class VCC4(PanTilt):
         self.busy_timeout, self.power_timeout = busy_timeout, power_timeout
         self.init_timeout, self.poll_interval = init_timeout, poll_interval
         self.tolerance = tolerance
-        self._parser = codec.AnswerParser(name)
+        self._parser = codec.AnswerParser()
         self._lock = threading.RLock()  # one command in flight, whichever thread asks
         self._connected = False
         self._speeds: tuple[int, int] | None = None  # pan, tilt counts/s last set
@@ -397,7 +445,7 @@ class VCC4(PanTilt):
                 self._reopen(asked)
                 reopened = True
                 continue
-            error = codec.error_for(answer.flags, self.name, asked)
+            error = error_for(answer.flags, self.name, asked)
             if error is None:
                 if len(answer.status) != expected:
                     raise self._bad_status(asked, answer.status, f"{expected} status bytes")
@@ -427,7 +475,12 @@ class VCC4(PanTilt):
         deadline = time.monotonic() + self.answer_timeout
         want = codec.MIN_ANSWER + expected
         while True:
-            answer = self._parser.next_answer()
+            try:
+                answer = self._parser.next_answer()
+            except codec.FrameError as exc:
+                raise ProtocolError(
+                    self.name, asked, str(exc), "check the cable and the baud rate (9600 8N1)"
+                ) from None
             if answer is not None:
                 if answer.device != 0:
                     raise ProtocolError(

@@ -6,20 +6,17 @@ share one definition of every byte and the golden tests pin it to specs/protocol
 Host -> camera: ``FF D1 D2 00 cc params EF``; camera -> host: ``FE D1 D2 E1 E2 [status] EF``.
 Numbers are fixed-width uppercase ASCII hex. Angles are counts of 0.1125 degrees around 0x8000,
 pan positive to the RIGHT on the wire (the driver converts to the API's left-positive radians).
+
+The codec imports nothing of ``twin``: a garbled frame is a ``FrameError`` and an answer's error
+code an ``AnswerError``; the driver turns them into the typed device errors that name the
+device, what was asked and the remedy.
 """
 
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-
-from twin.core.devices import (
-    DeviceBusyError,
-    DeviceError,
-    DeviceFaultError,
-    OutOfRangeError,
-    ProtocolError,
-)
+from enum import Enum
 
 CMD_HEADER = 0xFF
 ANSWER_HEADER = 0xFE
@@ -237,53 +234,38 @@ def decode_pan_tilt(status: bytes) -> tuple[int, int]:
     return parse_angle(status[:4]), parse_angle(status[4:])
 
 
-def error_for(flags: int, device: str, asked: str) -> DeviceError | None:
-    """The typed error an answer's flag byte means, or None for an ACK (A4).
+class AnswerError(Enum):
+    """What an answer's non-zero error-flag byte says (A4); the value is the manual's name."""
 
-    Priority follows the manual: mode > command > parameter > busy; a system error is a fault.
-    """
+    MODE = "mode error"
+    COMMAND = "command error"
+    PARAMETER = "parameter error"
+    SYSTEM = "system error"
+    BUSY = "busy"
+    UNKNOWN = "unknown answer code"
+
+
+def answer_error(flags: int) -> AnswerError | None:
+    """The error an answer's flag byte reports, or None for an ACK.
+
+    Busy is set beside every other error bit, so the priority is the manual's: mode > command >
+    parameter > busy; a system error (b0) outranks a plain busy."""
     if flags == 0:
         return None
-    code = hex_digits(flags, 2).decode()
-    if flags & FLAG_MODE:
-        return ModeError(
-            device,
-            asked,
-            f"mode error (answer code {code}): not in host control "
-            "mode, camera off or pedestal not initialised",
-            "initialise the camera (twin hw vcc4 init, or reconnect)",
-        )
-    if flags & FLAG_COMMAND:
-        return ProtocolError(
-            device,
-            asked,
-            f"command error (answer code {code}): the camera does not know this command",
-            "check the camera model (VC-C4)",
-        )
-    if flags & FLAG_PARAMETER:
-        return OutOfRangeError(
-            device,
-            asked,
-            f"parameter error (answer code {code}): value outside the movable range",
-            "stay within the camera's limits",
-        )
-    if flags & FLAG_SYSTEM:
-        return DeviceFaultError(
-            device, asked, f"system error (answer code {code})", "power-cycle the camera"
-        )
-    if flags & FLAG_BUSY:
-        return DeviceBusyError(
-            device,
-            asked,
-            f"busy (answer code {code}): an earlier motion, "
-            "initialisation or power change is still running",
-            "wait for it to finish or stop the head",
-        )
-    return ProtocolError(device, asked, f"unknown answer code {code}", "check the cable")
+    for bit, error in (
+        (FLAG_MODE, AnswerError.MODE),
+        (FLAG_COMMAND, AnswerError.COMMAND),
+        (FLAG_PARAMETER, AnswerError.PARAMETER),
+        (FLAG_SYSTEM, AnswerError.SYSTEM),
+        (FLAG_BUSY, AnswerError.BUSY),
+    ):
+        if flags & bit:
+            return error
+    return AnswerError.UNKNOWN
 
 
-class ModeError(DeviceFaultError):
-    """The camera refused a command for its mode: local mode, camera off, or not initialised."""
+class FrameError(ValueError):
+    """Bytes that cannot be an answer frame; the message says which byte and why."""
 
 
 # -- incremental answer parser ------------------------------------------------------------------
@@ -295,12 +277,11 @@ class AnswerParser:
     """Finds answer frames in a byte stream that may hold junk, cut-off or garbled frames.
 
     ``feed`` bytes in; ``next_answer`` returns the next complete ``Answer``, None while one is
-    incomplete, or raises ``ProtocolError`` for a garbled frame (whose bytes are dropped, so
+    incomplete, or raises ``FrameError`` for a garbled frame (whose bytes are dropped, so
     calling again continues with what follows). Bytes before an ``FE`` are skipped as junk.
     """
 
-    def __init__(self, device: str = "VC-C4") -> None:
-        self.device = device
+    def __init__(self) -> None:
         self._buf = bytearray()
 
     def feed(self, data: bytes) -> None:
@@ -356,13 +337,8 @@ class AnswerParser:
         # Keep a header at ``upto`` (a new frame starting inside the bad one); drop the rest.
         del self._buf[: max(upto, 1)]
 
-    def _garbled(self, what: str) -> ProtocolError:
-        return ProtocolError(
-            self.device,
-            "read an answer",
-            f"garbled answer frame ({what})",
-            "check the cable and the baud rate (9600 8N1)",
-        )
+    def _garbled(self, what: str) -> FrameError:
+        return FrameError(f"garbled answer frame ({what})")
 
 
 def describe(data: bytes) -> str:

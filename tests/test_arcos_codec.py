@@ -5,6 +5,8 @@ from __future__ import annotations
 
 import contextlib
 import math
+import subprocess
+import sys
 
 import pytest
 from hypothesis import given, settings
@@ -12,6 +14,7 @@ from hypothesis import strategies as st
 
 from hardware.arcos_codec import (
     Command,
+    PacketError,
     PacketParser,
     Sip,
     SipExtension,
@@ -27,7 +30,6 @@ from hardware.arcos_codec import (
     vel2_wheels,
     xy_delta,
 )
-from twin.core.devices import ProtocolError
 
 
 def h(text: str) -> bytes:
@@ -70,7 +72,7 @@ GOLDEN_COMMANDS = [
 @pytest.mark.parametrize(("cmd", "arg", "packet"), GOLDEN_COMMANDS)
 def test_golden_commands_both_ways(cmd: int, arg: int | bytes | None, packet: str) -> None:
     assert command(cmd, arg) == h(packet)
-    parser = PacketParser("robot")
+    parser = PacketParser()
     parser.feed(h(packet))
     decoded = parse_command(parser.next())
     assert (decoded.number, decoded.arg) == (cmd, arg)
@@ -114,7 +116,7 @@ SIP_VALUES = Sip(
 
 def test_sip_golden_both_ways() -> None:
     assert encode_sip(SIP_VALUES) == h(SIP_GOLDEN)
-    parser = PacketParser("base")
+    parser = PacketParser()
     parser.feed(h(SIP_GOLDEN))
     sip = parse_sip(parser.next())
     assert sip == SIP_VALUES
@@ -134,7 +136,7 @@ def test_sip_extension_golden_both_ways() -> None:
     )
     sip = Sip(**{**SIP_VALUES.__dict__, "extension": ext})
     assert encode_sip(sip) == h(SIP_EXT_GOLDEN)
-    parser = PacketParser("base")
+    parser = PacketParser()
     parser.feed(h(SIP_EXT_GOLDEN))
     assert parse_sip(parser.next()) == sip
 
@@ -145,7 +147,7 @@ def test_sync2_golden_both_ways() -> None:
         "74 2D 73 68 00 69 2D"
     )
     assert sync2_reply("MyBot", "Pioneer", "peoplebot-sh") == packet
-    parser = PacketParser("base")
+    parser = PacketParser()
     parser.feed(packet)
     assert parse_sync2(parser.next()) == ("MyBot", "Pioneer", "peoplebot-sh")
 
@@ -185,7 +187,7 @@ def test_heading_round_trip(th: int) -> None:
 
 
 def test_parser_skips_junk_and_splits_back_to_back_packets() -> None:
-    parser = PacketParser("base")
+    parser = PacketParser()
     stream = b"WMS2\r\xfa\x00junk" + command(Command.STOP) + command(Command.VEL, 5)
     for i in range(0, len(stream), 3):  # arrives in dribbles
         parser.feed(stream[i : i + 3])
@@ -197,18 +199,18 @@ def test_parser_skips_junk_and_splits_back_to_back_packets() -> None:
 def test_parser_bad_checksum_raises_then_resyncs() -> None:
     bad = bytearray(command(Command.VEL, 200))
     bad[-1] ^= 0xFF
-    parser = PacketParser("base")
+    parser = PacketParser()
     parser.feed(bytes(bad) + command(Command.STOP))
-    with pytest.raises(ProtocolError, match="bad checksum"):
+    with pytest.raises(PacketError, match="bad checksum"):
         parser.next()
     assert parser.next() == b"\x1d"
 
 
 def test_parser_truncated_packet_is_an_error_after_silence() -> None:
-    parser = PacketParser("base")
+    parser = PacketParser()
     parser.feed(command(Command.VEL, 200)[:5])
     assert parser.next() is None and parser.partial
-    with pytest.raises(ProtocolError, match="truncated"):
+    with pytest.raises(PacketError, match="truncated"):
         parser.expire_partial()
     assert not parser.partial
     parser.feed(command(Command.STOP))
@@ -216,13 +218,13 @@ def test_parser_truncated_packet_is_an_error_after_silence() -> None:
 
 
 def test_parser_truncated_packet_followed_by_a_good_one_recovers_it() -> None:
-    parser = PacketParser("base")
+    parser = PacketParser()
     parser.feed(command(Command.VEL, 200)[:5] + command(Command.STOP) + command(Command.STOP))
     seen, errors = [], 0
     for _ in range(10):
         try:
             data = parser.next()
-        except ProtocolError:
+        except PacketError:
             errors += 1
             continue
         if data is None:
@@ -232,9 +234,9 @@ def test_parser_truncated_packet_followed_by_a_good_one_recovers_it() -> None:
 
 
 def test_bad_byte_count_is_an_error() -> None:
-    parser = PacketParser("base")
+    parser = PacketParser()
     parser.feed(b"\xfa\xfb\x01\x00")
-    with pytest.raises(ProtocolError, match="byte count"):
+    with pytest.raises(PacketError, match="byte count"):
         parser.next()
 
 
@@ -250,19 +252,19 @@ def test_frame_limits() -> None:
 @settings(max_examples=300, deadline=None)
 @given(st.lists(st.binary(max_size=64), max_size=12))
 def test_fuzz_parser_never_crashes_or_hangs(chunks: list[bytes]) -> None:
-    parser = PacketParser("base")
+    parser = PacketParser()
     for chunk in chunks:
         parser.feed(chunk)
         for _ in range(200):  # every call consumes bytes or returns None: bounded
             try:
                 data = parser.next()
-            except ProtocolError:
+            except PacketError:
                 continue
             if data is None:
                 break
             assert data  # a packet has at least its type byte
             for decode in (parse_sip, parse_command, parse_sync2):
-                with contextlib.suppress(ProtocolError):
+                with contextlib.suppress(PacketError):
                     decode(data)
         else:
             pytest.fail("parser did not settle")
@@ -273,7 +275,7 @@ def test_fuzz_parser_never_crashes_or_hangs(chunks: list[bytes]) -> None:
             parser.expire_partial()
             while parser.next() is not None:
                 pass
-        except ProtocolError:
+        except PacketError:
             pass
     assert not parser.partial
 
@@ -282,13 +284,13 @@ def test_fuzz_parser_never_crashes_or_hangs(chunks: list[bytes]) -> None:
 @given(st.binary(max_size=40), st.integers(0, 255), st.binary(max_size=40))
 def test_fuzz_a_valid_packet_survives_junk_in_front(junk: bytes, cmd: int, payload: bytes) -> None:
     packet = frame(bytes([cmd]) + payload)
-    parser = PacketParser("base")
+    parser = PacketParser()
     parser.feed(junk + packet)
     found = []
     for _ in range(200):
         try:
             data = parser.next()
-        except ProtocolError:
+        except PacketError:
             continue
         if data is None:
             break
@@ -296,3 +298,26 @@ def test_fuzz_a_valid_packet_survives_junk_in_front(junk: bytes, cmd: int, paylo
     # junk may itself hold a header that swallows the packet; otherwise it must come out intact
     if b"\xfa" not in junk:
         assert found == [bytes([cmd]) + payload]
+
+
+def test_codec_errors_carry_what_the_driver_names() -> None:
+    """A codec error has no device name, but what was done, what was wrong and the remedy:
+    the driver makes its ``ProtocolError`` from them, so the user's line stays complete."""
+    bad = bytearray(command(Command.VEL, 200))
+    bad[-1] ^= 0xFF
+    parser = PacketParser()
+    parser.feed(bytes(bad))
+    with pytest.raises(PacketError) as caught:
+        parser.next()
+    error = caught.value
+    assert error.doing == "read a packet" and error.seen.startswith("bad checksum 0x")
+    assert error.remedy.startswith("check the baud rate") and "\n" not in str(error)
+
+
+def test_the_wire_codecs_import_nothing_of_twin() -> None:
+    code = (
+        "import sys, hardware.arcos_codec, hardware.vcc4_codec; "
+        "print(sorted(m for m in sys.modules if m == 'twin' or m.startswith('twin.')))"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "[]"

@@ -11,6 +11,7 @@ import pytest
 from hardware.arcos_codec import (
     SERAUX,
     Command,
+    PacketError,
     PacketParser,
     command,
     frame,
@@ -19,13 +20,12 @@ from hardware.arcos_codec import (
     parse_sync2,
     vel2_argument,
 )
-from twin.core.devices import ProtocolError
 from twin.serial_twins.arcos import ArcosEmulator, KinematicActuator
 from twin.serial_twins.bytedevice import EchoDevice
 
 
 def packets(data: bytes) -> list[bytes]:
-    parser = PacketParser("test")
+    parser = PacketParser()
     parser.feed(data)
     out = []
     while (p := parser.next()) is not None:
@@ -204,11 +204,11 @@ def test_fault_knobs() -> None:
     emu.tick(now + 0.2)
     data = emu.transmit(now + 0.2)
     assert data.startswith(b"noise")
-    with pytest.raises(ProtocolError, match="checksum"):
+    with pytest.raises(PacketError, match="checksum"):
         packets(data)
     emu.faults.truncate = 1
     emu.tick(now + 0.4)
-    parser = PacketParser("test")
+    parser = PacketParser()
     parser.feed(emu.transmit(now + 0.4))
     assert parser.next() is None and parser.partial
     emu.faults.mute = True

@@ -11,7 +11,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from hardware import vcc4_codec as codec
-from hardware.vcc4 import VCC4
+from hardware.vcc4 import VCC4, ModeError, error_for
 from twin.core.devices import (
     ConnectionLostError,
     DeviceBusyError,
@@ -114,21 +114,24 @@ def test_position_and_zoom_answers_decode() -> None:
 
 
 @pytest.mark.parametrize(
-    ("flags", "kind"),
+    ("flags", "meaning", "kind", "says"),
     [
-        (0x10, DeviceBusyError),
-        (0x30, ProtocolError),
-        (0x50, OutOfRangeError),
-        (0x90, codec.ModeError),
-        (0x11, DeviceFaultError),
-        (0x02, ProtocolError),
+        (0x10, codec.AnswerError.BUSY, DeviceBusyError, "busy (answer code 10)"),
+        (0x30, codec.AnswerError.COMMAND, ProtocolError, "command error (answer code 30)"),
+        (0x50, codec.AnswerError.PARAMETER, OutOfRangeError, "parameter error (answer code 50)"),
+        (0x90, codec.AnswerError.MODE, ModeError, "mode error (answer code 90)"),
+        (0x11, codec.AnswerError.SYSTEM, DeviceFaultError, "system error (answer code 11)"),
+        (0x02, codec.AnswerError.UNKNOWN, ProtocolError, "unknown answer code 02"),
     ],
 )
-def test_every_error_code_is_typed(flags: int, kind: type) -> None:
-    error = codec.error_for(flags, "VC-C4", "do it")
+def test_every_error_code_is_decoded_and_typed(
+    flags: int, meaning: codec.AnswerError, kind: type, says: str
+) -> None:
+    assert codec.answer_error(flags) is meaning and codec.answer_error(0) is None
+    error = error_for(flags, "VC-C4", "do it")  # the driver's translation
     assert type(error) is kind
-    assert str(error).startswith("VC-C4: do it: ") and "\n" not in str(error)
-    assert codec.error_for(0, "VC-C4", "do it") is None
+    assert str(error).startswith(f"VC-C4: do it: {says}") and "\n" not in str(error)
+    assert error_for(0, "VC-C4", "do it") is None
 
 
 # -- the answer parser --------------------------------------------------------------------------
@@ -139,7 +142,7 @@ def _drain(parser: codec.AnswerParser) -> tuple[list[codec.Answer], int]:
     for _ in range(10_000):
         try:
             answer = parser.next_answer()
-        except ProtocolError:
+        except codec.FrameError:
             errors += 1
             continue
         if answer is None:
@@ -419,7 +422,7 @@ def test_driver_recovers_from_one_bad_answer_and_types_persistent_ones() -> None
             camera.position()
         emulator.faults.truncate_count = 0
         emulator.faults.garble_count = 5
-        with pytest.raises(ProtocolError, match="garbled"):
+        with pytest.raises(ProtocolError, match=r"read the position: garbled answer frame"):
             camera.position()
         emulator.faults.garble_count = 0
         emulator.faults.silent = True

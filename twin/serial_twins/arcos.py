@@ -29,6 +29,7 @@ from hardware.arcos_codec import (
     ANGLE_UNITS,
     SERAUX,
     Command,
+    PacketError,
     PacketParser,
     Sip,
     SipExtension,
@@ -38,7 +39,6 @@ from hardware.arcos_codec import (
     sync2_reply,
     vel2_wheels,
 )
-from twin.core.devices import ProtocolError
 from twin.serial_twins.bytedevice import ByteDevice
 from twin.serial_twins.pty import PtyLink
 
@@ -255,7 +255,7 @@ class ArcosEmulator:
         self.identity = (name, robot_class, subclass)
         self.sip_period, self.watchdog, self.battery = sip_period, watchdog, battery
         self.faults = Faults()
-        self._parser = PacketParser("ARCOS emulator", max_count=204)
+        self._parser = PacketParser(max_count=204)
         self._out = bytearray()
         self.state = "waiting"  # waiting, sync0, sync1, synced, open
         self.motors_enabled = False
@@ -288,14 +288,14 @@ class ArcosEmulator:
         while True:
             try:
                 packet = self._parser.next()
-            except ProtocolError:
+            except PacketError:
                 self.bad_packets += 1  # ARCOS ignores bad packets (section B2)
                 continue
             if packet is None:
                 return
             try:
                 cmd = parse_command(packet)
-            except ProtocolError:
+            except PacketError:
                 self.bad_packets += 1
                 continue
             self._last_command = now
