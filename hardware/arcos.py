@@ -10,14 +10,15 @@ the robot's 2 s watchdog never trips while we are connected (specs/protocols.md,
 Motion is done by the firmware's own servos and checked on the SIP odometry: ``go_to`` turns
 with HEAD, drives with MOVE and turns again, re-planning from the reported pose until it is
 within 3 cm and 1 degree (the promise is 5 cm / 3 degrees); ``drive`` holds VEL and RVEL for a
-wall-clock duration. A stall or bumper bit during motion stops the robot and raises
+duration on the driver's clock. A stall or bumper bit during motion stops the robot and raises
 ``DeviceFaultError``; a robot that stops sending SIPs is a ``DeviceTimeoutError`` within
 ``sip_timeout``; a vanished line is a ``ConnectionLostError`` unless ``auto_reconnect`` brings
 it back. ``close()`` sends STOP, ENABLE 0 and CLOSE.
 
 API units: metres, radians, seconds, map frame (``set_pose`` anchors the odometry to it; the
 start pose given at construction anchors the first connection). Wire units (mm, mm/s, degrees)
-are converted here.
+are converted here. Every timeout, the keep-alive and the reader thread run on the injected
+``clock`` (``twin.core.clock``), so tests drive them in virtual time.
 """
 
 from __future__ import annotations
@@ -25,7 +26,6 @@ from __future__ import annotations
 import contextlib
 import math
 import threading
-import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import TypeVar
@@ -43,6 +43,7 @@ from hardware.arcos_codec import (
     xy_delta,
 )
 from hardware.transport import SerialTransport, Transport
+from twin.core.clock import SYSTEM_CLOCK, Clock
 from twin.core.devices import (
     Base,
     ConnectionLostError,
@@ -115,7 +116,8 @@ class _Odometry:
 
 class ArcosBase(Base):
     """An ARCOS/AROS robot base on any ``Transport`` (made by ``open_transport`` at connect,
-    again at a reconnect)."""
+    again at a reconnect). Timeouts, the keep-alive and ``drive``'s duration run on ``clock``
+    (seconds), and so does the reader thread's waiting."""
 
     def __init__(
         self,
@@ -131,8 +133,9 @@ class ArcosBase(Base):
         auto_reconnect: bool = True,
         reconnect_timeout: float = 5.0,
         enable_motors: bool = True,
+        clock: Clock = SYSTEM_CLOCK,
     ) -> None:
-        self.name = name
+        self.name, self.clock = name, clock
         self.enable_motors = enable_motors
         self._open_transport = open_transport
         self.limits = limits
@@ -141,7 +144,7 @@ class ArcosBase(Base):
         self.sip_period_limit = 0.3  # s: a pose older than three SIP cycles is refreshed first
         self.auto_reconnect, self.reconnect_timeout = auto_reconnect, reconnect_timeout
         self._transport: Transport | None = None
-        self._cond = threading.Condition()
+        self._cond = clock.condition()
         self._write_lock = threading.Lock()
         self._stop_io = threading.Event()
         self._io: threading.Thread | None = None
@@ -167,7 +170,12 @@ class ArcosBase(Base):
         """A base on serial port ``port`` (8N1, no flow control); ``options`` as for the
         constructor. Nothing is opened until ``connect()``."""
         name = str(options.pop("name", "ARCOS base"))
-        return cls(lambda: SerialTransport(port, baudrate, name), name=name, **options)  # type: ignore[arg-type]
+        clock: Clock = options.get("clock", SYSTEM_CLOCK)  # type: ignore[assignment]
+        return cls(
+            lambda: SerialTransport(port, baudrate, name, clock=clock),
+            name=name,
+            **options,  # type: ignore[arg-type]
+        )
 
     # -- lifecycle ---------------------------------------------------------------------------
     @property
@@ -205,13 +213,12 @@ class ArcosBase(Base):
             opened = True
             with self._cond:
                 self._odometry = None
-                first, self._sip_time = self.sip_count, time.monotonic()
+                first, self._sip_time = self.sip_count, self.clock.now()
             self._stop_io.clear()
-            self._io = threading.Thread(
-                target=self._io_loop, args=(transport,), name=f"{self.name} io", daemon=True
+            self._io = self.clock.start_thread(
+                lambda: self._io_loop(transport), name=f"{self.name} io"
             )
-            self._io.start()
-            self._await_sip(first, time.monotonic() + 2.0 * self.reply_timeout, "open the robot")
+            self._await_sip(first, self.clock.now() + 2.0 * self.reply_timeout, "open the robot")
             lim = self.limits
             for cmd, value in (
                 (Command.ENABLE, int(self.enable_motors)),
@@ -224,7 +231,7 @@ class ArcosBase(Base):
             ):
                 self._write(command(cmd, round(value)))
             if self.enable_motors:
-                self._await_motors(time.monotonic() + 2.0 * self.reply_timeout)
+                self._await_motors(self.clock.now() + 2.0 * self.reply_timeout)
         except BaseException:
             if opened and self._lost is None:  # leave no robot open behind a failed connect
                 with contextlib.suppress(DeviceError):
@@ -256,7 +263,7 @@ class ArcosBase(Base):
     def _stop_link(self) -> None:
         self._stop_io.set()
         if self._io is not None and self._io is not threading.current_thread():
-            self._io.join(timeout=1.0)
+            self.clock.join(self._io, 1.0)
         self._io = None
         if self._transport is not None:
             with contextlib.suppress(Exception):
@@ -269,9 +276,9 @@ class ArcosBase(Base):
             with contextlib.suppress(DeviceError):
                 self._write(command(Command.STOP))
                 self._write(command(Command.ENABLE, 0))
-                time.sleep(0.05)
+                self.clock.sleep(0.05)
                 self._write(command(Command.CLOSE, 1))
-                time.sleep(0.05)
+                self.clock.sleep(0.05)
         self._stop_link()
         self._connected = False
 
@@ -282,18 +289,18 @@ class ArcosBase(Base):
             if self._anchor is not None and self._odometry is not None:
                 self._map_pose = self._map_pose_now()
         self._stop_link()
-        end = time.monotonic() + self.reconnect_timeout
+        end = self.clock.now() + self.reconnect_timeout
         while True:
             try:
                 self._start_link()
                 break
             except (ConnectionLostError, DeviceTimeoutError, ProtocolError):
-                if time.monotonic() > end:
+                if self.clock.now() > end:
                     raise
             except DeviceError:  # the port is not back yet (replugged device, new pty)
-                if time.monotonic() > end:
+                if self.clock.now() > end:
                     raise
-            time.sleep(0.2)
+            self.clock.sleep(0.2)
         self.reconnects += 1
 
     # -- wire --------------------------------------------------------------------------------
@@ -305,7 +312,7 @@ class ArcosBase(Base):
             )
         with self._write_lock:
             transport.write(packet)
-            self._last_write = time.monotonic()
+            self._last_write = self.clock.now()
 
     def send(self, cmd: int, arg: int | bytes | None = None) -> None:
         """Send one raw ARCOS command (number from ``Command``; int in wire units)."""
@@ -315,7 +322,7 @@ class ArcosBase(Base):
     def _read_packet(
         self, transport: Transport, parser: PacketParser, timeout: float
     ) -> bytes | None:
-        end = time.monotonic() + timeout
+        end = self.clock.now() + timeout
         while True:
             try:
                 data = parser.next()
@@ -324,7 +331,7 @@ class ArcosBase(Base):
                 continue
             if data is not None:
                 return data
-            left = end - time.monotonic()
+            left = end - self.clock.now()
             if left <= 0:
                 return None
             parser.feed(transport.read(64, min(left, 0.05)))
@@ -360,7 +367,7 @@ class ArcosBase(Base):
             elif is_sip(reply):
                 self.still_open_recoveries += 1
                 self._write(command(Command.CLOSE, 1))
-                time.sleep(0.4)
+                self.clock.sleep(0.4)
                 transport.reset_input()
                 parser = PacketParser()
                 step = 0
@@ -376,14 +383,14 @@ class ArcosBase(Base):
 
     def _io_loop(self, transport: Transport) -> None:
         parser = PacketParser()
-        last_byte = time.monotonic()
+        last_byte = self.clock.now()
         while not self._stop_io.is_set():
             try:
                 # one byte with a timeout, then whatever else is there: low latency, no spin
                 data = transport.read(1, 0.02)
                 if data:
                     data += transport.read(4096, 0.0)
-                now = time.monotonic()
+                now = self.clock.now()
                 if now - self._last_write >= self.pulse_period:
                     self._write(command(Command.PULSE))
             except DeviceError as exc:
@@ -455,12 +462,12 @@ class ArcosBase(Base):
 
     def _await_sip(self, after: int, deadline: float, asked: str) -> Sip:
         """The first SIP numbered above ``after``; typed errors on silence or a lost line."""
-        began = time.monotonic()
+        began = self.clock.now()
         with self._cond:
             while self.sip_count <= after or self.last_sip is None:
                 if self._lost is not None:
                     raise self._lost
-                now = time.monotonic()
+                now = self.clock.now()
                 # silence counts from when we began waiting too: a reader thread starved of
                 # the GIL by a long computation gets a full timeout to catch up
                 if now - max(self._sip_time, began) > self.sip_timeout:
@@ -495,10 +502,10 @@ class ArcosBase(Base):
     def pose(self) -> Pose2D:
         self._require_link("read the pose")
         with self._cond:
-            stale = time.monotonic() - self._sip_time > self.sip_period_limit
+            stale = self.clock.now() - self._sip_time > self.sip_period_limit
             seq = self.sip_count
         if stale:  # the pose must be current: wait for the next SIP (or a typed error)
-            self._await_sip(seq, time.monotonic() + self.sip_timeout, "read the pose")
+            self._await_sip(seq, self.clock.now() + self.sip_timeout, "read the pose")
         with self._cond:
             if self._lost is not None:
                 raise self._lost
@@ -553,7 +560,7 @@ class ArcosBase(Base):
 
     def go_to(self, goal: Pose2D, *, timeout: float = 60.0) -> Pose2D:
         asked = f"go to {_fmt(goal)}"
-        deadline = time.monotonic() + timeout
+        deadline = self.clock.now() + timeout
         reconnects = 0
         for _ in range(12):
             self._require_link(asked)
@@ -606,22 +613,23 @@ class ArcosBase(Base):
                 "use smaller values",
             )
         self._require_link(asked)
-        start = time.monotonic()
+        clock = self.clock
+        start = clock.now()
         end = start + duration
         with self._cond:
             seq = self.sip_count
         try:
             self._write(command(Command.VEL, round(speed * 1000.0)))
             self._write(command(Command.RVEL, round(math.degrees(turn_rate))))
-            while time.monotonic() < end:
+            while clock.now() < end:
                 sip = self._await_sip(seq, end + self.sip_timeout, asked)
                 seq = self.sip_count
-                if time.monotonic() - start > 0.25:  # SIPs from before VEL may still show a stall
+                if clock.now() - start > 0.25:  # SIPs from before VEL may still show a stall
                     self._check_fault(sip, asked)
         finally:
             with contextlib.suppress(DeviceError):
                 self._write(command(Command.STOP))
-        return self._command_then_settle(command(Command.STOP), time.monotonic() + 5.0, asked)
+        return self._command_then_settle(command(Command.STOP), clock.now() + 5.0, asked)
 
     # -- AUX port ------------------------------------------------------------------------------
     def aux_transport(self, port: int = 1) -> ArcosAuxTransport:
@@ -689,12 +697,13 @@ class ArcosAuxTransport:
 
     def _read(self, size: int, timeout: float) -> bytes:
         base = self.base
-        end = time.monotonic() + timeout
+        clock = base.clock
+        end = clock.now() + timeout
         with base._cond:
             out = self._take(size)
         one_at_a_time = False
         while len(out) < size:
-            now = time.monotonic()
+            now = clock.now()
             if now >= end:
                 break
             want = 1 if one_at_a_time else min(size - len(out), MAX_STRING)
@@ -702,7 +711,7 @@ class ArcosAuxTransport:
             with base._cond:
                 wait_end = min(end, now + self.probe)
                 while not base._aux[self.port] and base._lost is None:
-                    left = wait_end - time.monotonic()
+                    left = wait_end - clock.now()
                     if left <= 0:
                         break
                     base._cond.wait(left)

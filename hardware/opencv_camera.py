@@ -1,9 +1,10 @@
 """A real camera through OpenCV: a V4L2 device (index or /dev/videoN), a stream URL or a file.
 
 Frames come out as the survey needs them: H x W x 3 uint8 RGB at the configured size (320x240
-by default, resized if the device cannot deliver it), stamped with ``time.monotonic()`` at
-capture. ``grab`` drops frames the driver buffered before the call, so a frame is never older
-than the pan-tilt move that preceded it. When the device stops delivering (unplugged, a stream
+by default, resized if the device cannot deliver it), stamped at capture on the camera's clock
+(``now()``: the system's monotonic clock unless a test injects its own). ``grab`` drops frames
+the driver buffered before the call, so a frame is never older than the pan-tilt move that
+preceded it. When the device stops delivering (unplugged, a stream
 ends), ``grab`` reconnects a few times before it gives up with a one-line error.
 """
 
@@ -11,12 +12,12 @@ from __future__ import annotations
 
 import math
 import os
-import time
 from pathlib import Path
 
 import cv2
 import numpy as np
 
+from twin.core.clock import SYSTEM_CLOCK, Clock
 from twin.core.devices import Camera, ConnectionLostError, DeviceError, DeviceTimeoutError, Frame
 from twin.core.geometry import CameraModel
 
@@ -25,7 +26,11 @@ STALE_FRAMES = 2
 
 
 class OpenCVCamera(Camera):
-    """``device``: an index (0 = /dev/video0), a device path, a URL, or a video file."""
+    """``device``: an index (0 = /dev/video0), a device path, a URL, or a video file.
+
+    ``reconnect_delay`` and ``read_timeout`` are seconds of ``clock``, which also stamps the
+    frames. OpenCV's own open and read timeouts are real milliseconds inside the backend; the
+    driver measures a grab on its clock and calls one longer than four read timeouts stuck."""
 
     def __init__(
         self,
@@ -37,8 +42,9 @@ class OpenCVCamera(Camera):
         reconnect_attempts: int = 3,
         reconnect_delay: float = 0.5,
         read_timeout: float = 2.0,
+        clock: Clock = SYSTEM_CLOCK,
     ) -> None:
-        self.device = device
+        self.device, self.clock = device, clock
         self.name = f"{name} {device}"
         self._model = CameraModel(width, height, hfov)
         self.reconnect_attempts = reconnect_attempts
@@ -55,6 +61,9 @@ class OpenCVCamera(Camera):
     @property
     def is_connected(self) -> bool:
         return self._connected
+
+    def now(self) -> float:
+        return self.clock.now()
 
     def connect(self) -> None:
         if self._capture is None:
@@ -109,21 +118,21 @@ class OpenCVCamera(Camera):
                 self._reopen()
             image = self._read_fresh() if self._capture is not None else None
             if image is not None:
-                return Frame(self._to_rgb(image), time.monotonic())
+                return Frame(self._to_rgb(image), self.clock.now())
         raise ConnectionLostError(self.name, "grab a frame",
                                   f"no frames after {self.reconnect_attempts} reconnects",
                                   "check the cable and that the device still exists")  # fmt: skip
 
     def _read_fresh(self) -> np.ndarray | None:
         assert self._capture is not None
-        started = time.monotonic()
+        started = self.clock.now()
         for _ in range(STALE_FRAMES):
             if not self._capture.grab():
                 return None
         ok, image = self._capture.read()
-        if time.monotonic() - started > 4 * self.read_timeout:
-            raise DeviceTimeoutError(self.name, "grab a frame",
-                                     f"took {time.monotonic() - started:.1f} s",
+        took = self.clock.now() - started
+        if took > 4 * self.read_timeout:
+            raise DeviceTimeoutError(self.name, "grab a frame", f"took {took:.1f} s",
                                      "check the device's frame rate and exposure")  # fmt: skip
         return image if ok and image is not None and image.size else None
 
@@ -132,7 +141,7 @@ class OpenCVCamera(Camera):
         if self._capture is not None:
             self._capture.release()
             self._capture = None
-        time.sleep(self.reconnect_delay)
+        self.clock.sleep(self.reconnect_delay)
         self.reconnects += 1
         try:
             self._capture = self._open()

@@ -14,7 +14,12 @@ from typing import Protocol
 
 import serial
 
+from twin.core.clock import SYSTEM_CLOCK, Clock
 from twin.core.devices import ConnectionLostError, DeviceError
+
+# Longest real-time block inside one pyserial read (s): a read's timeout is kept on the
+# driver's clock, so it is waited out in slices short enough to re-check that clock.
+MAX_BLOCK = 0.05
 
 
 class Transport(Protocol):
@@ -26,7 +31,7 @@ class Transport(Protocol):
 
     def read(self, size: int, timeout: float) -> bytes:
         """Up to ``size`` bytes, returning early only when ``size`` arrived; fewer (maybe none)
-        when ``timeout`` seconds pass first."""
+        when ``timeout`` seconds (of the driver's clock) pass first."""
         ...
 
     def reset_input(self) -> None:
@@ -41,11 +46,13 @@ class SerialTransport:
 
     ``rts=True`` asserts RTS after opening (the VC-C4 answers only while its CTS is high); a
     pseudo-terminal has no modem lines and refuses the ioctl, which is taken as "nothing to
-    assert", not as a failure (specs/protocols.md, part D).
+    assert", not as a failure (specs/protocols.md, part D). Read timeouts run on ``clock``.
     """
 
-    def __init__(self, port: str, baudrate: int, name: str, rts: bool = False) -> None:
-        self.port, self.name = port, name
+    def __init__(
+        self, port: str, baudrate: int, name: str, rts: bool = False, clock: Clock = SYSTEM_CLOCK
+    ) -> None:
+        self.port, self.name, self.clock = port, name, clock
         try:
             self._serial = serial.Serial(
                 port,
@@ -84,9 +91,15 @@ class SerialTransport:
             ) from None
 
     def read(self, size: int, timeout: float) -> bytes:
+        clock = self.clock
+        end = clock.now() + timeout
+        out = b""
         try:
-            self._serial.timeout = max(timeout, 0.0)
-            return self._serial.read(size)
+            while True:
+                self._serial.timeout = min(max(end - clock.now(), 0.0), MAX_BLOCK)
+                out += self._serial.read(size - len(out))
+                if len(out) >= size or clock.now() >= end:
+                    return out
         except (OSError, serial.SerialException, termios.error, TypeError) as exc:
             # pyserial raises TypeError from a closed port's internal state on some versions.
             raise ConnectionLostError(

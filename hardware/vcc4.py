@@ -16,12 +16,12 @@ from __future__ import annotations
 
 import math
 import threading
-import time
 from collections.abc import Callable
 
 from hardware import vcc4_codec as codec
 from hardware.transport import SerialTransport, Transport
 from hardware.vcc4_codec import AnswerError
+from twin.core.clock import SYSTEM_CLOCK, Clock
 from twin.core.devices import (
     VCC4_LIMITS,
     ConnectionLostError,
@@ -45,6 +45,7 @@ NAME = "VC-C4"
 # manual's full -30..+90 degrees, so the API's limits are the camera's (ARIA stops at +88).
 INIT_TILT_RANGE = codec.TILT_RANGE_MAX
 LIMITS = VCC4_LIMITS
+BUSY_RETRY = 0.02  # s between resends of a command the camera answered busy
 
 
 class ModeError(DeviceFaultError):
@@ -107,7 +108,8 @@ class VCC4(PanTilt):
     ARIA), ``busy_timeout`` for retrying ordinary busy answers, ``power_timeout`` and
     ``init_timeout`` for the busy spells after camera-on and pedestal initialisation,
     ``poll_interval`` between status polls while moving; ``retries`` resends after a lost,
-    truncated or garbled answer; ``tolerance`` (rad) how close a finished move must be.
+    truncated or garbled answer; ``tolerance`` (rad) how close a finished move must be. All of
+    them run on ``clock`` (a test's ``ManualClock`` makes them virtual seconds).
     """
 
     name = NAME
@@ -125,10 +127,11 @@ class VCC4(PanTilt):
         init_timeout: float = 15.0,
         poll_interval: float = 0.03,
         tolerance: float = math.radians(0.25),
+        clock: Clock = SYSTEM_CLOCK,
     ) -> None:
         if transport is None and opener is None:
             raise ValueError("give a transport or an opener")
-        self.name = name
+        self.name, self.clock = name, clock
         self._transport = transport
         self._opener = opener
         self._owns_transport = transport is None
@@ -146,9 +149,10 @@ class VCC4(PanTilt):
     def open(cls, port: str, baudrate: int = 9600, **options: object) -> VCC4:
         """A driver for a camera wired straight to serial ``port`` (opened on ``connect``)."""
         name = str(options.pop("name", NAME))
+        clock: Clock = options.get("clock", SYSTEM_CLOCK)  # type: ignore[assignment]
 
         def opener() -> Transport:
-            return SerialTransport(port, baudrate, name, rts=True)
+            return SerialTransport(port, baudrate, name, rts=True, clock=clock)
 
         return cls(opener=opener, name=name, **options)  # type: ignore[arg-type]
 
@@ -245,7 +249,7 @@ class VCC4(PanTilt):
         asked = f"move to pan {math.degrees(pan):.1f} deg, tilt {math.degrees(tilt):.1f} deg"
         self.require_connected(asked)
         LIMITS.check(self.name, pan, tilt, speed)
-        deadline = time.monotonic() + timeout
+        deadline = self.clock.now() + timeout
         pan_pps, tilt_pps = codec.PAN_SPEED_MAX, codec.TILT_SPEED_MAX
         if speed is not None:
             pps = codec.degrees_to_count(math.degrees(speed))
@@ -296,7 +300,7 @@ class VCC4(PanTilt):
                 )
                 if abs(pan - want[0]) <= tolerance and abs(tilt - want[1]) <= tolerance:
                     return pan, tilt
-                if time.monotonic() > deadline:
+                if self.clock.now() > deadline:
                     raise DeviceFaultError(
                         self.name,
                         asked,
@@ -304,7 +308,7 @@ class VCC4(PanTilt):
                         f"tilt {math.degrees(tilt):.2f} deg",
                         "check nothing blocks the head",
                     )
-            if time.monotonic() > deadline:
+            if self.clock.now() > deadline:
                 pan, tilt = self._position(asked)
                 raise DeviceTimeoutError(
                     self.name,
@@ -313,7 +317,7 @@ class VCC4(PanTilt):
                     f"{math.degrees(pan):.1f} deg, tilt {math.degrees(tilt):.1f} deg)",
                     "allow more time or a higher speed",
                 )
-            time.sleep(self.poll_interval)
+            self.clock.sleep(self.poll_interval)
 
     def position(self) -> tuple[float, float]:
         self.require_connected("read the position")
@@ -376,13 +380,13 @@ class VCC4(PanTilt):
                 self.name, asked, f"outside 0..{top}", "choose a zoom within the camera's range"
             )
         self._exchange(codec.zoom(position), asked)
-        deadline = time.monotonic() + timeout
+        deadline = self.clock.now() + timeout
         while (now := self._zoom(asked)) != position:
-            if time.monotonic() > deadline:
+            if self.clock.now() > deadline:
                 raise DeviceTimeoutError(
                     self.name, asked, f"at {now} after {timeout:g} s", "allow more time"
                 )
-            time.sleep(self.poll_interval)
+            self.clock.sleep(self.poll_interval)
         return now
 
     def zoom(self) -> int:
@@ -426,7 +430,7 @@ class VCC4(PanTilt):
         busy_timeout: float | None,
         retries: int | None,
     ) -> codec.Answer:
-        busy_until = time.monotonic() + (
+        busy_until = self.clock.now() + (
             self.busy_timeout if busy_timeout is None else busy_timeout
         )
         attempts = self.retries if retries is None else retries
@@ -450,8 +454,8 @@ class VCC4(PanTilt):
                 if len(answer.status) != expected:
                     raise self._bad_status(asked, answer.status, f"{expected} status bytes")
                 return answer
-            if isinstance(error, DeviceBusyError) and time.monotonic() < busy_until:
-                time.sleep(0.02)
+            if isinstance(error, DeviceBusyError) and self.clock.now() < busy_until:
+                self.clock.sleep(BUSY_RETRY)
                 continue
             raise error
 
@@ -472,7 +476,7 @@ class VCC4(PanTilt):
             ) from None
         self._parser.clear()
         transport.write(frame)
-        deadline = time.monotonic() + self.answer_timeout
+        deadline = self.clock.now() + self.answer_timeout
         want = codec.MIN_ANSWER + expected
         while True:
             try:
@@ -490,7 +494,7 @@ class VCC4(PanTilt):
                         "check the cascade setting",
                     )
                 return answer
-            left = deadline - time.monotonic()
+            left = deadline - self.clock.now()
             if left <= 0:
                 partial = self._parser.partial
                 if partial:

@@ -1,10 +1,13 @@
 """VC-C4 codec golden bytes (specs/protocols.md A9, A10), the answer parser (with a fuzz), the
-emulator's state machine and error codes, and the driver against the emulator in-process."""
+emulator's state machine and error codes, and the driver against the emulator in-process.
+
+Everything here runs in virtual time (``ManualClock``): the emulator keeps the real camera's
+timings (10 ms latency, 9600 baud, 4 s power-on, 2.5 s initialisation) and the driver its
+real timeouts, and a test of them takes milliseconds whatever else the machine is doing."""
 
 from __future__ import annotations
 
 import math
-import time
 
 import pytest
 from hypothesis import given, settings
@@ -12,6 +15,7 @@ from hypothesis import strategies as st
 
 from hardware import vcc4_codec as codec
 from hardware.vcc4 import VCC4, ModeError, error_for
+from twin.core.clock import ManualClock
 from twin.core.devices import (
     ConnectionLostError,
     DeviceBusyError,
@@ -197,26 +201,18 @@ def test_parser_finds_a_frame_after_any_junk(junk: bytes, status: bytes) -> None
 # -- the emulator's state machine ---------------------------------------------------------------
 
 
-class Clock:
-    def __init__(self) -> None:
-        self.t = 1000.0
-
-    def __call__(self) -> float:
-        return self.t
-
-
-def _emulator(**options: object) -> tuple[VCC4Emulator, Clock, KinematicHead]:
-    clock = Clock()
+def _emulator(**options: object) -> tuple[VCC4Emulator, ManualClock, KinematicHead]:
+    clock = ManualClock(1000.0)
     head = KinematicHead(clock)
     timing = VCC4Timing(latency=0.010, baud=0, power_seconds=4.0, init_seconds=2.5)
     return VCC4Emulator(head, timing=timing, **options), clock, head  # type: ignore[arg-type]
 
 
-def _ask(emulator: VCC4Emulator, clock: Clock, frame: bytes) -> bytes:
-    emulator.receive(frame, clock.t)
-    assert emulator.transmit(clock.t + 0.005) == b""  # not before the ~10 ms latency
-    clock.t += 0.011
-    return emulator.transmit(clock.t)
+def _ask(emulator: VCC4Emulator, clock: ManualClock, frame: bytes) -> bytes:
+    emulator.receive(frame, clock.now())
+    assert emulator.transmit(clock.now() + 0.005) == b""  # not before the ~10 ms latency
+    clock.advance(0.011)
+    return emulator.transmit(clock.now())
 
 
 def test_emulator_walks_through_the_init_sequence() -> None:
@@ -229,14 +225,14 @@ def test_emulator_walks_through_the_init_sequence() -> None:
     assert _ask(emu, clock, codec.pedestal_init()) == mode_error  # camera off
     assert _ask(emu, clock, codec.power(True)) == ack
     assert _ask(emu, clock, codec.pedestal_init()) == busy  # powering on
-    clock.t += 4.0
+    clock.advance(4.0)
     assert _ask(emu, clock, codec.pan_tilt(100, 0)) == mode_error  # pedestal not initialised
     assert _ask(emu, clock, codec.pedestal_init()) == busy  # it runs Initialize 2 by itself
-    clock.t += 2.5
+    clock.advance(2.5)
     assert _ask(emu, clock, codec.operation_status(True)) == codec.answer_frame(0, b"00000")
     assert _ask(emu, clock, codec.pedestal_init()) == ack
     assert _ask(emu, clock, codec.pan_speed(800)) == busy  # calibrating
-    clock.t += 2.5
+    clock.advance(2.5)
     assert _ask(emu, clock, codec.pan_speed(400)) == ack
     assert _ask(emu, clock, codec.tilt_range(-267, 800)) == ack
     assert _ask(emu, clock, codec.operation_status(True)) == codec.answer_frame(0, b"00000")
@@ -246,7 +242,7 @@ def test_emulator_walks_through_the_init_sequence() -> None:
     assert head.commands[-1][2] == pytest.approx(math.radians(45.0))
     assert _ask(emu, clock, codec.pan_tilt(0, 0)) == busy
     assert _ask(emu, clock, codec.operation_status()) == codec.answer_frame(0, b"A00")
-    clock.t += 10.0
+    clock.advance(10.0)
     assert _ask(emu, clock, codec.pan_tilt_request()) == codec.answer_frame(0, b"7E7082BC")
     assert _ask(emu, clock, codec.operation_status()) == codec.answer_frame(0, b"000")
 
@@ -272,9 +268,9 @@ def test_emulator_error_codes(frame: bytes, answer: str) -> None:
 def test_emulator_is_silent_for_other_devices_and_drops_early_commands() -> None:
     emu, clock, _ = _emulator(host_mode=True, pedestal_ready=True)
     assert _ask(emu, clock, codec.command_frame(0x63, device=1)) == b""
-    emu.receive(codec.pan_tilt_request() + codec.zoom_request(), clock.t)
-    clock.t += 0.05
-    assert emu.transmit(clock.t) == codec.answer_frame(0, b"80008000")  # zoom request dropped
+    emu.receive(codec.pan_tilt_request() + codec.zoom_request(), clock.now())
+    clock.advance(0.05)
+    assert emu.transmit(clock.now()) == codec.answer_frame(0, b"80008000")  # zoom request dropped
     assert emu.received[-1].code == codec.PAN_TILT_REQUEST
 
 
@@ -302,10 +298,20 @@ def test_emulator_fuzz_answers_only_well_formed_frames(chunks: list[bytes]) -> N
     emu, clock, _ = _emulator()
     parser = codec.AnswerParser()
     for data in chunks:
-        emu.receive(data, clock.t)
-        clock.t += 0.05
-        parser.feed(emu.transmit(clock.t))
+        emu.receive(data, clock.now())
+        clock.advance(0.05)
+        parser.feed(emu.transmit(clock.now()))
         assert _drain(parser)[1] == 0  # whatever came in, what goes out parses
+
+
+def test_emulator_answers_after_its_latency_and_the_bytes_time_on_the_line() -> None:
+    clock = ManualClock()
+    emu = VCC4Emulator(KinematicHead(clock), host_mode=True, pedestal_ready=True)  # 9600 baud
+    emu.receive(codec.pan_tilt_request(), clock.now())
+    on_line = 10 * 14 / 9600  # the 14-byte position answer, 10 bits a byte
+    assert emu.next_due() == pytest.approx(0.010 + on_line)
+    assert emu.transmit(0.010 + on_line - 1e-4) == b""
+    assert emu.transmit(0.010 + on_line) == codec.answer_frame(0, b"80008000")
 
 
 def test_emulator_faults() -> None:
@@ -327,13 +333,14 @@ def test_emulator_faults() -> None:
 
 
 class LoopTransport:
-    """The driver's bytes straight into an emulator; at most ``chunk`` bytes per read, like the
-    AUX tunnel handing over 6 bytes and then the rest."""
+    """The driver's bytes straight into an emulator, on a ``ManualClock``: a read waits (in
+    virtual time) for the emulator's next answer or its timeout. At most ``chunk`` bytes per
+    read, like the AUX tunnel handing over 6 bytes and then the rest."""
 
     name = "loop"
 
-    def __init__(self, emulator: VCC4Emulator, chunk: int = 1000) -> None:
-        self.emulator, self.chunk = emulator, chunk
+    def __init__(self, emulator: VCC4Emulator, clock: ManualClock, chunk: int = 1000) -> None:
+        self.emulator, self.clock, self.chunk = emulator, clock, chunk
         self.buffer = bytearray()
         self.written: list[bytes] = []
         self.closed = False
@@ -342,17 +349,19 @@ class LoopTransport:
         if self.closed:
             raise ConnectionLostError("loop", "write", "closed", "reconnect")
         self.written.append(bytes(data))
-        self.emulator.receive(data, time.monotonic())
+        self.emulator.receive(data, self.clock.now())
 
     def read(self, size: int, timeout: float) -> bytes:
-        end = time.monotonic() + timeout
+        clock = self.clock
+        end = clock.now() + timeout
         while True:
-            self.buffer += self.emulator.transmit(time.monotonic())
-            if len(self.buffer) >= min(size, self.chunk) or time.monotonic() >= end:
+            self.buffer += self.emulator.transmit(clock.now())
+            if len(self.buffer) >= min(size, self.chunk) or clock.now() >= end:
                 out = bytes(self.buffer[: min(size, self.chunk)])
                 del self.buffer[: len(out)]
                 return out
-            time.sleep(0.001)
+            due = self.emulator.next_due()
+            clock.sleep((end if due is None else min(due, end)) - clock.now())
 
     def reset_input(self) -> None:
         self.buffer.clear()
@@ -361,36 +370,35 @@ class LoopTransport:
         self.closed = True
 
 
-def _fast_timing() -> VCC4Timing:
-    return VCC4Timing(latency=0.003, baud=0, power_seconds=0.1, init_seconds=0.1, zoom_rate=20000)
-
-
-def _driver(chunk: int = 1000, **options: object) -> tuple[VCC4, VCC4Emulator, LoopTransport]:
-    head = KinematicHead(limits=codec_limits())
-    emulator = VCC4Emulator(head, timing=_fast_timing(), **options)  # type: ignore[arg-type]
-    transport = LoopTransport(emulator, chunk)
-    return VCC4(transport, answer_timeout=0.1, poll_interval=0.005), emulator, transport
-
-
-def codec_limits():  # a fast head: 900 deg/s, so moves take milliseconds
-    from twin.core.devices import PanTiltLimits
-
-    return PanTiltLimits(-1.8, 1.8, -0.6, 1.6, math.radians(900), math.radians(900))
+def _driver(
+    chunk: int = 1000, **options: object
+) -> tuple[VCC4, VCC4Emulator, LoopTransport, ManualClock]:
+    """The driver with its default timeouts against the camera's real timings."""
+    clock = ManualClock()
+    emulator = VCC4Emulator(KinematicHead(clock), **options)  # type: ignore[arg-type]
+    transport = LoopTransport(emulator, clock, chunk)
+    return VCC4(transport, clock=clock), emulator, transport, clock
 
 
 def test_driver_init_sends_the_spec_sequence_and_moves_left_positive() -> None:
-    camera, emulator, transport = _driver(camera_on=False)
+    camera, emulator, transport, clock = _driver(camera_on=False)
     with camera:
+        # it waited out the 4 s power-on and the 2.5 s initialisation, answered busy meanwhile
+        assert 6.5 <= clock.now() < 7.0
         codes = [codec.parse_command(f).code for f in transport.written]  # type: ignore[union-attr]
         first = [c for i, c in enumerate(codes) if i == 0 or c != codes[i - 1]]
         assert first == [0x86, 0x90, 0xA0, 0x58, 0x50, 0x51, 0x64]
         assert transport.written[-1] == codec.tilt_range(-267, 800)
+        start = clock.now()
         pan, tilt = camera.move_to(math.radians(30), math.radians(-10))
+        assert clock.now() - start >= 30 / 90  # a 30-degree pan at the top 90 deg/s
         assert codec.pan_tilt(-267, -89) in transport.written  # wire pan is positive right
         assert (pan, tilt) == pytest.approx((math.radians(30), math.radians(-10)), abs=2e-3)
         assert emulator.head.position() == pytest.approx((pan, tilt), abs=2e-3)
         # a 20 deg/s cap goes to both axes
+        start = clock.now()
         camera.move_to(0.0, 0.0, speed=math.radians(20))
+        assert clock.now() - start >= 30 / 20
         assert codec.pan_speed(178) in transport.written
         assert codec.tilt_speed(178) in transport.written
         assert camera.zoom_to(1000) == 1000 and camera.zoom() == 1000
@@ -404,15 +412,24 @@ def test_driver_init_sends_the_spec_sequence_and_moves_left_positive() -> None:
     assert not transport.closed and transport.written[-1] == codec.pan_tilt_stop()
 
 
+def test_driver_waits_for_answers_at_9600_baud() -> None:
+    camera, _, _, clock = _driver(host_mode=True, pedestal_ready=True)
+    with camera:
+        start = clock.now()
+        camera.position()
+        # 10 ms latency plus 14 bytes at 9600 baud: the driver read it as soon as it was there
+        assert clock.now() - start == pytest.approx(0.010 + 10 * 14 / 9600)
+
+
 def test_driver_reads_answers_handed_over_in_pieces() -> None:
-    camera, _, _ = _driver(chunk=2, host_mode=True, pedestal_ready=True)
+    camera, _, _, _ = _driver(chunk=2, host_mode=True, pedestal_ready=True)
     with camera:
         camera.move_to(math.radians(-45), math.radians(20))
         assert camera.position() == pytest.approx((math.radians(-45), math.radians(20)), abs=2e-3)
 
 
 def test_driver_recovers_from_one_bad_answer_and_types_persistent_ones() -> None:
-    camera, emulator, _ = _driver(host_mode=True, pedestal_ready=True)
+    camera, emulator, _, clock = _driver(host_mode=True, pedestal_ready=True)
     with camera:
         for knob in ("junk_count", "truncate_count", "garble_count"):
             setattr(emulator.faults, knob, 1)
@@ -426,15 +443,17 @@ def test_driver_recovers_from_one_bad_answer_and_types_persistent_ones() -> None
             camera.position()
         emulator.faults.garble_count = 0
         emulator.faults.silent = True
-        start = time.monotonic()
-        with pytest.raises(DeviceTimeoutError, match="no answer"):
+        start = clock.now()
+        with pytest.raises(DeviceTimeoutError, match=r"no answer within 0\.4 s"):
             camera.position()
-        assert time.monotonic() - start < 5.0  # a few answer timeouts, not a hang
+        # the 0.4 s answer timeout, once more after one resend: no shorter, no longer
+        assert clock.now() - start == pytest.approx(2 * 0.4)
         emulator.faults.silent = False
+        assert camera.position() == pytest.approx((0.0, 0.0))
 
 
 def test_driver_reinitialises_after_a_mode_error_and_bounds_busy_retries() -> None:
-    camera, emulator, _ = _driver(host_mode=True, pedestal_ready=True)
+    camera, emulator, _, clock = _driver(host_mode=True, pedestal_ready=True)
     with camera:
         emulator.host_mode = False  # the camera was switched to local control
         camera.move_to(math.radians(10))
@@ -444,11 +463,12 @@ def test_driver_reinitialises_after_a_mode_error_and_bounds_busy_retries() -> No
         assert emulator.pedestal_ready and pan == pytest.approx(math.radians(-10), abs=2e-3)
         assert emulator.pan_speed == 267  # the asked speed survives the re-initialisation
         emulator.timing.init_seconds = 5.0
-        emulator.receive(codec.pedestal_init(), time.monotonic())  # someone recalibrates
-        time.sleep(0.01)
-        assert emulator.transmit(time.monotonic()) == codec.answer_frame()
+        emulator.receive(codec.pedestal_init(), clock.now())  # someone recalibrates
+        clock.advance(0.02)
+        assert emulator.transmit(clock.now()) == codec.answer_frame()
         camera.busy_timeout = 0.2
-        start = time.monotonic()
+        start = clock.now()
         with pytest.raises(DeviceBusyError):
             camera.stop()
-        assert time.monotonic() - start < 4.0  # bounded by busy_timeout, not the 5 s init
+        # retried busy answers for its 0.2 s (plus the last round trip), not the 5 s init
+        assert 0.2 <= clock.now() - start < 0.3

@@ -10,8 +10,9 @@ speaks again (specs/protocols.md, B4.3 and part D). Bytes for AUX1 (TTY2) go to 
 
 The actuator is the emulator's only view of the robot: ``SimActuator`` drives the MuJoCo
 robot's wheels (under its lock) and reads its wheel odometry; ``KinematicActuator`` integrates
-ideal unicycle motion for unit tests. ``serve_arcos`` runs an emulator on a ``PtyLink`` in a
-thread and returns a handle with ``.path`` for the driver.
+ideal unicycle motion for unit tests. ``serve_arcos`` runs an emulator on a line (a
+``PtyLink``, or a ``MemoryLink`` for tests in virtual time) in a thread timed by a ``Clock``
+and returns a handle with ``.path`` (or ``.link.transport()``) for the driver.
 
 Wire units (mm, mm/s, degrees, 4096ths of a turn) stay in this module and the codec; the
 actuator speaks metres, radians and seconds.
@@ -21,7 +22,6 @@ from __future__ import annotations
 
 import math
 import threading
-import time
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Protocol
 
@@ -39,8 +39,9 @@ from hardware.arcos_codec import (
     sync2_reply,
     vel2_wheels,
 )
-from twin.serial_twins.bytedevice import ByteDevice
-from twin.serial_twins.pty import PtyLink
+from twin.core.clock import SYSTEM_CLOCK, Clock
+from twin.serial_twins.bytedevice import ByteDevice, DeviceLine
+from twin.serial_twins.pty import PtyLink, check_clock
 
 if TYPE_CHECKING:
     from twin.sim.robot import SimRobot
@@ -98,16 +99,19 @@ class DriveActuator(Protocol):
 
 
 class KinematicActuator:
-    """An ideal unicycle in its own clock (wall time x ``time_scale``) for unit tests; set
-    ``stalled``/``front_bumpers`` to inject faults."""
+    """An ideal unicycle for unit tests, on its own clock: ``clock`` time x ``time_scale``
+    since it was made; set ``stalled``/``front_bumpers`` to inject faults."""
 
     track = PEOPLEBOT_TRACK
 
     def __init__(
-        self, time_scale: float = 1.0, start: tuple[float, float, float] = (0.0, 0.0, 0.0)
+        self,
+        time_scale: float = 1.0,
+        start: tuple[float, float, float] = (0.0, 0.0, 0.0),
+        clock: Clock = SYSTEM_CLOCK,
     ) -> None:
-        self.time_scale = time_scale
-        self._t0 = time.monotonic()
+        self.time_scale, self._clock = time_scale, clock
+        self._t0 = clock.now()
         self._last = 0.0
         self._pose = start  # m, m, rad: e.g. near the SIP's 32.767 m wrap for tests
         self._vel = (0.0, 0.0)
@@ -116,7 +120,7 @@ class KinematicActuator:
         self.front_bumpers = 0
 
     def clock(self) -> float:
-        return (time.monotonic() - self._t0) * self.time_scale
+        return (self._clock.now() - self._t0) * self.time_scale
 
     def _advance(self) -> None:
         now = self.clock()
@@ -235,9 +239,9 @@ class Faults:
 
 class ArcosEmulator:
     """The firmware state machine; feed it bytes with ``receive``, call ``tick`` often, and
-    send what ``transmit`` returns. Times ``now`` are ``time.monotonic()`` seconds (SIP cycle
-    and watchdog run in wall time, like a real controller's; motion runs on the actuator's
-    clock)."""
+    send what ``transmit`` returns. Times ``now`` are the server's clock seconds (SIP cycle and
+    watchdog run on it, like a real controller's on its crystal; motion runs on the actuator's
+    clock, which for the twin is the simulated world's)."""
 
     def __init__(
         self,
@@ -270,7 +274,7 @@ class ArcosEmulator:
         self._v = self._w = 0.0  # commanded body speeds now, mm/s and deg/s
         self._origin = (0.0, 0.0, 0.0)  # SETO: the odometry frame's origin in actuator frame
         self._last_clock = actuator.clock()
-        self._last_command = time.monotonic()
+        self._last_command = 0.0  # set by OPEN before the watchdog can look at it
         self._next_sip = 0.0
         self.watchdog_tripped = False
         self._aux_in = bytearray()
@@ -526,40 +530,46 @@ class ArcosEmulator:
 
 
 class ArcosServer:
-    """An ``ArcosEmulator`` served on a ``PtyLink`` by a daemon thread; ``path`` is what the
-    driver opens. ``hangup()`` unplugs and replugs the line (the emulator keeps its state, so
-    the driver meets a robot that is still open)."""
+    """An ``ArcosEmulator`` served on a line (``PtyLink`` or ``MemoryLink``) by a daemon thread
+    that ticks it every ``period`` seconds of ``clock``; ``path`` is what the driver opens on a
+    pty. ``hangup()`` unplugs and replugs the line (the emulator keeps its state, so the driver
+    meets a robot that is still open)."""
 
-    def __init__(self, emulator: ArcosEmulator, link: PtyLink, period: float = 0.004) -> None:
-        self.emulator, self.link, self.period = emulator, link, period
-        self._lock = threading.Lock()
+    def __init__(
+        self,
+        emulator: ArcosEmulator,
+        link: DeviceLine,
+        period: float = 0.004,
+        clock: Clock = SYSTEM_CLOCK,
+    ) -> None:
+        check_clock(link, clock)
+        self.emulator, self.link, self.period, self.clock = emulator, link, period, clock
         self._stop = threading.Event()
-        self._thread = threading.Thread(target=self._run, name="arcos-emulator", daemon=True)
-        self._thread.start()
+        self._thread = clock.start_thread(self._run, name="arcos-emulator")
 
     @property
     def path(self) -> str:
+        if not isinstance(self.link, PtyLink):
+            raise TypeError("a memory line has no path: plug a driver in with link.transport()")
         return self.link.path
 
     def _run(self) -> None:
-        emu, link = self.emulator, self.link
+        emu, link, clock = self.emulator, self.link, self.clock
         while not self._stop.is_set():
             data = link.read(512, self.period)
-            with self._lock:
-                now = time.monotonic()
-                emu.receive(data, now)
-                emu.tick(now)
-                out = emu.transmit(now)
+            now = clock.now()
+            emu.receive(data, now)
+            emu.tick(now)
+            out = emu.transmit(now)
             if out:
                 link.write(out)
 
     def hangup(self) -> None:
-        with self._lock:
-            self.link.hangup()
+        self.link.hangup()
 
     def stop(self) -> None:
         self._stop.set()
-        self._thread.join(timeout=2.0)
+        self.clock.join(self._thread, 2.0)
         self.emulator.actuator.set_velocity(0.0, 0.0)
         self.link.close()
 
@@ -572,13 +582,16 @@ class ArcosServer:
 
 def serve_arcos(
     sim_or_actuator: SimRobot | DriveActuator,
-    link: PtyLink | None = None,
+    link: DeviceLine | None = None,
     aux1: ByteDevice | None = None,
+    *,
+    clock: Clock = SYSTEM_CLOCK,
     **options: object,
 ) -> ArcosServer:
     """Start an emulated ARCOS base on ``link`` (a new pseudo-terminal if None) driving a
     ``SimRobot`` (through ``SimActuator``) or any ``DriveActuator``; ``aux1`` is the device on
-    the robot's AUX1 port; ``options`` go to ``ArcosEmulator`` (name, sip_period, watchdog...).
+    the robot's AUX1 port; ``clock`` times the SIP cycle and the watchdog; ``options`` go to
+    ``ArcosEmulator`` (name, sip_period, watchdog...).
     """
     actuator: DriveActuator
     if hasattr(sim_or_actuator, "set_velocity"):
@@ -586,4 +599,4 @@ def serve_arcos(
     else:
         actuator = SimActuator(sim_or_actuator)  # type: ignore[arg-type]
     emulator = ArcosEmulator(actuator, aux1, **options)  # type: ignore[arg-type]
-    return ArcosServer(emulator, link if link is not None else PtyLink())
+    return ArcosServer(emulator, link if link is not None else PtyLink(), clock=clock)

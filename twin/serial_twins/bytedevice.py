@@ -2,7 +2,8 @@
 
 The same emulated VC-C4 can sit on its own pseudo-terminal (direct RS-232 wiring) or behind the
 emulated ARCOS base's AUX port (bytes tunnelled in TTY2 / GETAUX / SERAUX packets): both
-carriers only push the host's bytes in and pull the device's answers out.
+carriers only push the host's bytes in and pull the device's answers out. A carrier's line is
+a ``DeviceLine``: a pseudo-terminal (``PtyLink``) or a line in memory (``MemoryLink``).
 """
 
 from __future__ import annotations
@@ -10,9 +11,25 @@ from __future__ import annotations
 from typing import Protocol
 
 
+class DeviceLine(Protocol):
+    """The device's end of a serial line, as an emulator's server pumps it."""
+
+    def read(self, size: int, timeout: float) -> bytes:
+        """Up to ``size`` bytes from the host as soon as any arrive; b"" after ``timeout`` s."""
+        ...
+
+    def write(self, data: bytes) -> None: ...
+
+    def hangup(self) -> None:
+        """Unplug and replug: the host's open port dies and the device is reachable anew."""
+        ...
+
+    def close(self) -> None: ...
+
+
 class ByteDevice(Protocol):
     def receive(self, data: bytes, now: float) -> None:
-        """Bytes from the host, arriving at ``now`` (``time.monotonic()`` seconds)."""
+        """Bytes from the host, arriving at ``now`` (the carrier's clock, seconds)."""
         ...
 
     def transmit(self, now: float) -> bytes:

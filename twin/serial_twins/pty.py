@@ -4,6 +4,9 @@ The slave side is put in raw mode (no echo, no line editing, 8 bits through) lik
 line, and the emulator keeps its own handle on it so that a driver closing and reopening the
 port does not end the link. ``hangup`` replaces the pseudo-terminal by a new one, as a device
 unplugged and plugged in again would; a stable ``link`` path (a symlink) follows it.
+
+A pseudo-terminal's reads wait in real time (``select``): serve one with the system clock. For
+tests in virtual time, ``twin.serial_twins.memory.MemoryLink`` is the same line without a pty.
 """
 
 from __future__ import annotations
@@ -12,8 +15,21 @@ import contextlib
 import os
 import select
 import termios
+import threading
 import tty
 from pathlib import Path
+
+from twin.core.clock import Clock, SystemClock
+
+
+def check_clock(link: object, clock: Clock) -> None:
+    """Refuse to serve a pseudo-terminal on anything but the system clock: its ``select``
+    waits in real time, so a manual clock would stand still while the server waits."""
+    if isinstance(link, PtyLink) and not isinstance(clock, SystemClock):
+        raise ValueError(
+            "a pseudo-terminal's reads wait in real time: serve it with the system clock, "
+            "or use a MemoryLink on this clock"
+        )
 
 
 class PtyLink:
@@ -22,6 +38,8 @@ class PtyLink:
     def __init__(self, link: str | os.PathLike[str] | None = None) -> None:
         self.link = Path(link) if link is not None else None
         self._master = self._slave = -1
+        # a hangup from a test's thread must not close the descriptors under a read or write
+        self._fd_lock = threading.Lock()
         self._open()
 
     def _open(self) -> None:
@@ -42,35 +60,43 @@ class PtyLink:
 
     def read(self, size: int, timeout: float) -> bytes:
         """Up to ``size`` bytes the driver wrote; b"" when none arrive within ``timeout`` s."""
-        if self._master < 0:
-            return b""
-        ready, _, _ = select.select([self._master], [], [], max(timeout, 0.0))
-        if not ready:
-            return b""
-        try:
-            return os.read(self._master, size)
-        except (BlockingIOError, OSError):
-            return b""
+        with self._fd_lock:
+            if self._master < 0:
+                return b""
+            ready, _, _ = select.select([self._master], [], [], max(timeout, 0.0))
+            if not ready:
+                return b""
+            try:
+                return os.read(self._master, size)
+            except (BlockingIOError, OSError):
+                return b""
 
     def write(self, data: bytes) -> None:
-        """Send bytes to the driver (dropped, like a line with nobody listening, if it fails)."""
+        """Send bytes to the driver. If nobody drains the other end for 50 ms the rest is
+        dropped, as a serial line drops what a receiver has no room for."""
         view = memoryview(data)
-        while view and self._master >= 0:
-            try:
-                written = os.write(self._master, view)
-            except BlockingIOError:
-                select.select([], [self._master], [], 0.05)
-                continue
-            except OSError:
-                return
-            view = view[written:]
+        with self._fd_lock:
+            while view and self._master >= 0:
+                try:
+                    view = view[os.write(self._master, view) :]
+                except BlockingIOError:
+                    _, ready, _ = select.select([], [self._master], [], 0.05)
+                    if not ready:
+                        return
+                except OSError:
+                    return
 
     def hangup(self) -> None:
         """Close this pseudo-terminal and open a new one (the link, if any, moves to it)."""
-        self.close()
-        self._open()
+        with self._fd_lock:
+            self._close()
+            self._open()
 
     def close(self) -> None:
+        with self._fd_lock:
+            self._close()
+
+    def _close(self) -> None:
         for fd in (self._master, self._slave):
             if fd >= 0:
                 with contextlib.suppress(OSError):

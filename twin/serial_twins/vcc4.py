@@ -7,23 +7,25 @@ runs, the error codes ``39 30`` (mode), ``31 30`` (busy), ``35 30`` (parameter),
 (command), silence for other device numbers, answers ~10 ms after the command. The head it moves
 is a ``HeadActuator``: the MuJoCo robot's head (``SimHeadActuator``) or a kinematic stand-in.
 
-The same emulator sits on its own pseudo-terminal (``serve_vcc4``: direct RS-232 wiring) or is
-handed to the ARCOS emulator as its AUX1 device (tunnelled wiring). ``VCC4Faults`` injects the
-line faults tests need: junk before answers, truncated or garbled answers, silence.
+The same emulator sits on its own line (``serve_vcc4``: direct RS-232 wiring, a pseudo-terminal
+or a ``MemoryLink``) or is handed to the ARCOS emulator as its AUX1 device (tunnelled wiring).
+``VCC4Faults`` injects the line faults tests need: junk before answers, truncated or garbled
+answers, silence. All times are seconds of the server's ``Clock``.
 """
 
 from __future__ import annotations
 
 import math
 import threading
-import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any, Protocol
 
 from hardware import vcc4_codec as codec
+from twin.core.clock import SYSTEM_CLOCK, Clock
 from twin.core.devices import VCC4_LIMITS, PanTiltLimits
-from twin.serial_twins.pty import PtyLink
+from twin.serial_twins.bytedevice import DeviceLine
+from twin.serial_twins.pty import PtyLink, check_clock
 
 
 def _rad(counts: float) -> float:
@@ -87,14 +89,12 @@ class SimHeadActuator:
 class KinematicHead:
     """A head that moves at constant speed per axis in ``clock`` time: for unit tests."""
 
-    def __init__(
-        self, clock: Callable[[], float] = time.monotonic, limits: PanTiltLimits = VCC4_LIMITS
-    ) -> None:
+    def __init__(self, clock: Clock = SYSTEM_CLOCK, limits: PanTiltLimits = VCC4_LIMITS) -> None:
         self.clock, self.limits = clock, limits
         self._start = (0.0, 0.0)
         self._goal = (0.0, 0.0)
         self._speed = (limits.pan_speed, limits.tilt_speed)
-        self._t0 = clock()
+        self._t0 = clock.now()
         self.commands: list[tuple[float, float, float, float]] = []
 
     def _at(self, t: float) -> tuple[float, float]:
@@ -105,25 +105,25 @@ class KinematicHead:
         return out[0], out[1]
 
     def command(self, pan: float, tilt: float, pan_speed: float, tilt_speed: float) -> None:
-        now = self.clock()
+        now = self.clock.now()
         self._start, self._t0 = self._at(now), now
         self._goal, self._speed = (pan, tilt), (pan_speed, tilt_speed)
         self.commands.append((pan, tilt, pan_speed, tilt_speed))
 
     def position(self) -> tuple[float, float]:
-        return self._at(self.clock())
+        return self._at(self.clock.now())
 
     def settled(self) -> bool:
         return self.position() == self._goal
 
     def stop(self) -> None:
         here = self.position()
-        self._start, self._goal, self._t0 = here, here, self.clock()
+        self._start, self._goal, self._t0 = here, here, self.clock.now()
 
 
 @dataclass
 class VCC4Timing:
-    """Seconds (wall clock): answer latency (manual: 10 ms typical), how long camera power
+    """Seconds (the server's clock): answer latency (manual: 10 ms typical), how long camera power
     changes and pedestal initialisation keep the camera busy (A7), zoom speed in counts/s; an
     answer also takes its bytes' time on the line at ``baud`` (10 bits a byte; 0: instant)."""
 
@@ -224,7 +224,7 @@ class VCC4Emulator:
             return b"".join(ready)
 
     def next_due(self) -> float | None:
-        """When the next answer goes out (monotonic seconds), None if none is pending."""
+        """When the next answer goes out (clock seconds), None if none is pending."""
         with self._lock:
             return min((due for due, _ in self._outbox), default=None)
 
@@ -524,47 +524,49 @@ _HANDLERS: dict[int, _Handler] = {
 
 
 class VCC4Server:
-    """A thread pumping bytes between a ``PtyLink`` and an emulator (direct RS-232 wiring)."""
+    """A thread pumping bytes between a line (``PtyLink`` or ``MemoryLink``) and an emulator
+    (direct RS-232 wiring), timing the answers on ``clock``."""
 
-    def __init__(self, emulator: VCC4Emulator, link: PtyLink) -> None:
-        self.emulator, self.link = emulator, link
-        self._link_lock = threading.Lock()  # a hangup must not close the fds under a read
+    def __init__(
+        self, emulator: VCC4Emulator, link: DeviceLine, clock: Clock = SYSTEM_CLOCK
+    ) -> None:
+        check_clock(link, clock)
+        self.emulator, self.link, self.clock = emulator, link, clock
         self._stop = threading.Event()
-        self._thread = threading.Thread(target=self._run, name="vcc4-pty", daemon=True)
+        self._thread: threading.Thread | None = None
 
     @property
     def path(self) -> str:
-        """What the driver opens (``VCC4.open(server.path)``)."""
+        """What the driver opens (``VCC4.open(server.path)``): the pseudo-terminal's path."""
+        if not isinstance(self.link, PtyLink):
+            raise TypeError("a memory line has no path: plug a driver in with link.transport()")
         return self.link.path
 
     def start(self) -> VCC4Server:
-        self._thread.start()
+        self._thread = self.clock.start_thread(self._run, name="vcc4-line")
         return self
 
     def _run(self) -> None:
-        emulator, link = self.emulator, self.link
+        emulator, link, clock = self.emulator, self.link, self.clock
         while not self._stop.is_set():
             due = emulator.next_due()
-            wait = 0.05 if due is None else min(0.05, max(0.0, due - time.monotonic()))
-            with self._link_lock:
-                data = link.read(256, wait)
-                if data:
-                    emulator.receive(data, time.monotonic())
-                out = emulator.transmit(time.monotonic())
-                if out:
-                    link.write(out)
+            wait = 0.05 if due is None else min(0.05, max(0.0, due - clock.now()))
+            data = link.read(256, wait)
+            if data:
+                emulator.receive(data, clock.now())
+            out = emulator.transmit(clock.now())
+            if out:
+                link.write(out)
 
     def hangup(self) -> None:
-        """Unplug and replug: the pseudo-terminal is replaced (the link path follows)."""
-        with self._link_lock:
-            self.link.hangup()
+        """Unplug and replug: the line is replaced (a pty's link path follows)."""
+        self.link.hangup()
 
     def stop(self) -> None:
         self._stop.set()
-        if self._thread.is_alive():
-            self._thread.join(timeout=2.0)
-        with self._link_lock:
-            self.link.close()
+        if self._thread is not None:
+            self.clock.join(self._thread, 2.0)
+        self.link.close()
 
     def __enter__(self) -> VCC4Server:
         return self
@@ -574,10 +576,16 @@ class VCC4Server:
 
 
 def serve_vcc4(
-    sim_or_head: Any, link: PtyLink | None = None, **emulator_options: Any
+    sim_or_head: Any,
+    link: DeviceLine | None = None,
+    *,
+    clock: Clock = SYSTEM_CLOCK,
+    **emulator_options: Any,
 ) -> VCC4Server:
-    """Start an emulated VC-C4 on a pseudo-terminal, moving ``sim_or_head``: a ``SimRobot``
-    (wrapped in ``SimHeadActuator``; keep a ``WorldRunner`` stepping it) or a ``HeadActuator``.
-    ``emulator_options`` go to ``VCC4Emulator``. Returns the running server (``.path``)."""
+    """Start an emulated VC-C4 on ``link`` (a new pseudo-terminal if None), moving
+    ``sim_or_head``: a ``SimRobot`` (wrapped in ``SimHeadActuator``; keep a ``WorldRunner``
+    stepping it) or a ``HeadActuator``. ``emulator_options`` go to ``VCC4Emulator``. Returns
+    the running server (``.path`` for a pty, ``.link.transport()`` for a memory line)."""
     head = SimHeadActuator(sim_or_head) if hasattr(sim_or_head, "command_head") else sim_or_head
-    return VCC4Server(VCC4Emulator(head, **emulator_options), link or PtyLink()).start()
+    line = link if link is not None else PtyLink()
+    return VCC4Server(VCC4Emulator(head, **emulator_options), line, clock).start()
