@@ -311,7 +311,21 @@ class ArcosBase(Base):
                 self.name, "send a command", "the line is closed", "connect first"
             )
         with self._write_lock:
-            transport.write(packet)
+            try:
+                transport.write(packet)
+            except ConnectionLostError as exc:
+                # the caller may notice a vanished line before the reader thread does: record
+                # it here too, so the next call reconnects instead of writing into the void
+                with self._cond:
+                    if self._lost is None and transport is self._transport:
+                        self._lost = ConnectionLostError(
+                            self.name,
+                            "send a command",
+                            exc.seen,
+                            "check the cable; reconnect() opens the line again",
+                        )
+                    self._cond.notify_all()
+                raise
             self._last_write = self.clock.now()
 
     def send(self, cmd: int, arg: int | bytes | None = None) -> None:
