@@ -11,6 +11,9 @@ the robot drives a slow circle so SIPs carry changing odometry. Measured:
   and a SERAUX packet: what every VC-C4 command pays when the camera hangs off the robot.
 * Command to SIP: VEL sent until the first SIP showing the robot moving (ARCOS does not
   acknowledge commands, so the SIP stream is the answer; includes up to one 100 ms SIP cycle).
+* Virtual time: the same driver, emulator and world on a ``ManualClock`` over a ``MemoryLink``
+  (how the tests run them): wall seconds for ``--virtual-seconds`` of driving, i.e. how much
+  faster than real time a test of the base runs.
 
 Figures depend on the CPU and on what else runs on it.
 """
@@ -18,13 +21,16 @@ Figures depend on the CPU and on what else runs on it.
 from __future__ import annotations
 
 import argparse
+import math
 import statistics
 import time
 
 from hardware.arcos import ArcosBase
 from hardware.arcos_codec import Command
+from twin.core.clock import ManualClock
 from twin.serial_twins.arcos import serve_arcos
 from twin.serial_twins.bytedevice import EchoDevice
+from twin.serial_twins.memory import MemoryLink
 from twin.serial_twins.runner import WorldRunner
 from twin.sim import make_sim_robot
 
@@ -43,6 +49,7 @@ def main() -> None:
     parser.add_argument("--seconds", type=float, default=10.0)
     parser.add_argument("--trips", type=int, default=50)
     parser.add_argument("--time-scale", type=float, default=1.0)
+    parser.add_argument("--virtual-seconds", type=float, default=20.0)
     args = parser.parse_args()
 
     sim, _ = make_sim_robot("living_room")
@@ -77,7 +84,7 @@ def main() -> None:
                 t = time.perf_counter()
                 base.send(Command.VEL, 100 if i % 2 else -100)
                 while True:
-                    sip = base._await_sip(seq, time.monotonic() + 2.0, "bench")
+                    sip = base._await_sip(seq, base.clock.now() + 2.0, "bench")
                     seq = base.sip_count
                     if sip.moving:
                         break
@@ -85,6 +92,27 @@ def main() -> None:
                 base.send(Command.STOP)
             print(f"VEL -> first SIP showing motion: {_ms(latencies)}")
         server.stop()
+    _virtual_time(args.virtual_seconds)
+
+
+def _virtual_time(seconds: float) -> None:
+    clock = ManualClock()
+    sim, _ = make_sim_robot("living_room")
+    link = MemoryLink(clock, "arcos line")
+    with (
+        WorldRunner(sim, clock=clock),
+        serve_arcos(sim, link, clock=clock),
+        ArcosBase(lambda: link.transport("ARCOS base"), clock=clock) as base,
+    ):
+        wall = time.perf_counter()
+        began = clock.now()
+        base.drive(0.1, math.radians(10), seconds)
+        virtual = clock.now() - began
+        wall = time.perf_counter() - wall
+    print(
+        f"virtual time (ManualClock, memory line, world at 1x): {virtual:.1f} s of driving "
+        f"in {wall:.2f} s wall, {virtual / wall:.1f}x real time ({base.sip_count} SIPs)"
+    )
 
 
 if __name__ == "__main__":

@@ -1,10 +1,12 @@
 """The emulated ARCOS firmware on its own (no pty): handshake bytes, OPEN forms, SIP stream,
-still-open behaviour, motion commands, watchdog, AUX tunnel, fault knobs."""
+still-open behaviour, motion commands, watchdog, AUX tunnel, fault knobs.
+
+The test is the firmware's clock: it hands the emulator each ``now`` and moves the kinematic
+robot's ``ManualClock`` along, so motion, SIP cycle and watchdog run in virtual time."""
 
 from __future__ import annotations
 
 import math
-import time
 
 import pytest
 
@@ -20,6 +22,7 @@ from hardware.arcos_codec import (
     parse_sync2,
     vel2_argument,
 )
+from twin.core.clock import ManualClock
 from twin.serial_twins.arcos import ArcosEmulator, KinematicActuator
 from twin.serial_twins.bytedevice import EchoDevice
 
@@ -39,18 +42,24 @@ def exchange(emu: ArcosEmulator, data: bytes, now: float) -> list[bytes]:
     return packets(emu.transmit(now))
 
 
-def opened(aux1: EchoDevice | None = None, scale: float = 1.0) -> tuple[ArcosEmulator, float]:
-    emu = ArcosEmulator(KinematicActuator(scale), aux1, name="MyBot")
-    now = time.monotonic()
+def later(emu: ArcosEmulator, clock: ManualClock, seconds: float, data: bytes = b"") -> list[bytes]:
+    """Let ``seconds`` pass (robot and firmware alike), then exchange ``data``."""
+    clock.advance(seconds)
+    return exchange(emu, data, clock.now())
+
+
+def opened(aux1: EchoDevice | None = None) -> tuple[ArcosEmulator, ManualClock]:
+    clock = ManualClock(100.0)
+    emu = ArcosEmulator(KinematicActuator(clock=clock), aux1, name="MyBot")
     for step in (0, 1, 2):
-        exchange(emu, command(step), now)
-    exchange(emu, command(Command.OPEN, 1), now)
-    return emu, now
+        exchange(emu, command(step), clock.now())
+    exchange(emu, command(Command.OPEN, 1), clock.now())
+    return emu, clock
 
 
 def test_handshake_bytes() -> None:
-    emu = ArcosEmulator(KinematicActuator(), name="MyBot")
-    now = time.monotonic()
+    emu = ArcosEmulator(KinematicActuator(clock=ManualClock()), name="MyBot")
+    now = 0.0
     emu.receive(b"WMS2\r" + command(Command.SYNC0), now)  # ARIA's junk before syncing
     assert emu.transmit(now) == bytes.fromhex("FA FB 03 00 00 00")
     emu.receive(command(Command.SYNC1), now)
@@ -66,8 +75,8 @@ def test_handshake_bytes() -> None:
 
 @pytest.mark.parametrize("open_arg", [None, 1])
 def test_open_in_both_forms_starts_sips_every_100_ms(open_arg: int | None) -> None:
-    emu = ArcosEmulator(KinematicActuator())
-    now = time.monotonic()
+    emu = ArcosEmulator(KinematicActuator(clock=ManualClock()))
+    now = 0.0
     for step in (0, 1, 2):
         exchange(emu, command(step), now)
     assert exchange(emu, command(Command.OPEN, open_arg), now) == []
@@ -79,33 +88,33 @@ def test_open_in_both_forms_starts_sips_every_100_ms(open_arg: int | None) -> No
 
 
 def test_no_sips_and_no_motion_before_open() -> None:
-    emu = ArcosEmulator(KinematicActuator())
-    now = time.monotonic()
+    emu = ArcosEmulator(KinematicActuator(clock=ManualClock()))
+    now = 0.0
     assert exchange(emu, command(Command.VEL, 200), now + 1) == []
     assert emu.actuator.velocity == (0.0, 0.0)
 
 
 def test_sync0_while_open_answers_with_sips_then_close_ends_the_session() -> None:
-    emu, now = opened()
-    assert exchange(emu, command(Command.SYNC0), now + 0.2)[0][0] == 0x32
-    assert exchange(emu, command(Command.CLOSE, 1), now + 0.3) == []
+    emu, clock = opened()
+    assert later(emu, clock, 0.2, command(Command.SYNC0))[0][0] == 0x32
+    assert later(emu, clock, 0.1, command(Command.CLOSE, 1)) == []
     assert emu.state == "waiting"
-    assert exchange(emu, b"", now + 1.0) == []
-    assert exchange(emu, command(Command.SYNC0), now + 1.1) == [b"\x00"]
+    assert later(emu, clock, 0.7) == []
+    assert later(emu, clock, 0.1, command(Command.SYNC0)) == [b"\x00"]
 
 
 def test_bad_checksum_is_ignored() -> None:
-    emu, now = opened()
+    emu, clock = opened()
     bad = bytearray(command(Command.ENABLE, 1))
     bad[-1] ^= 1
-    exchange(emu, bytes(bad), now)
+    exchange(emu, bytes(bad), clock.now())
     assert emu.bad_packets == 1 and not emu.motors_enabled
 
 
 def test_motion_needs_enable_and_follows_vel_rvel_vel2_stop() -> None:
-    emu, now = opened()
+    emu, clock = opened()
     act = emu.actuator
-    exchange(emu, command(Command.VEL, 200), now)
+    exchange(emu, command(Command.VEL, 200), clock.now())
     assert act.velocity == (0.0, 0.0)  # motors off: ignored (allenh1/p2os#41)
     exchange(
         emu,
@@ -114,76 +123,72 @@ def test_motion_needs_enable_and_follows_vel_rvel_vel2_stop() -> None:
         + command(Command.SETA, -10000)
         + command(Command.SETRA, 10000)
         + command(Command.SETRA, -10000),
-        now,
+        clock.now(),
     )
-    exchange(emu, command(Command.VEL, 200) + command(Command.RVEL, -30), now)
-    time.sleep(0.05)
-    exchange(emu, b"", now + 0.05)
+    exchange(emu, command(Command.VEL, 200) + command(Command.RVEL, -30), clock.now())
+    later(emu, clock, 0.05)  # 10 m/s^2 and 10000 deg/s^2: full speed within one tick
     v, w = act.velocity
     assert v == pytest.approx(0.2) and w == pytest.approx(math.radians(-30))
-    exchange(emu, command(Command.VEL2, vel2_argument(-100, 100)), now + 0.1)
-    time.sleep(0.05)
-    exchange(emu, b"", now + 0.15)
+    later(emu, clock, 0.05, command(Command.VEL2, vel2_argument(-100, 100)))
+    later(emu, clock, 0.05)
     v, w = act.velocity
     assert v == pytest.approx(0.0, abs=1e-9) and w == pytest.approx(0.2 / act.track)
-    exchange(emu, command(Command.STOP), now + 0.2)
-    time.sleep(0.05)
-    exchange(emu, b"", now + 0.25)
+    later(emu, clock, 0.05, command(Command.STOP))
+    later(emu, clock, 0.05)
     assert act.velocity == (0.0, 0.0)
 
 
-def _run(emu: ArcosEmulator, seconds: float, now: float) -> float:
-    end = time.monotonic() + seconds
-    while time.monotonic() < end:
-        now += 0.01
-        exchange(emu, command(Command.PULSE), now)
-        time.sleep(0.005)
-    return now
+def _run(emu: ArcosEmulator, clock: ManualClock, seconds: float) -> None:
+    """``seconds`` of a client that keeps talking, ticked every 10 ms like the pty server."""
+    for _ in range(round(seconds / 0.01)):
+        later(emu, clock, 0.01, command(Command.PULSE))
 
 
 def test_head_and_move_servo_to_their_targets() -> None:
-    emu, now = opened(scale=8.0)
-    exchange(emu, command(Command.ENABLE, 1), now)
-    exchange(emu, command(Command.HEAD, 90), now)
-    now = _run(emu, 0.6, now)
+    emu, clock = opened()
+    exchange(emu, command(Command.ENABLE, 1), clock.now())
+    exchange(emu, command(Command.HEAD, 90), clock.now())
+    _run(emu, clock, 2.0)  # 90 deg at up to 100 deg/s, 150 deg/s^2
     x, y, th = emu.actuator.odometry()
     assert math.degrees(th) == pytest.approx(90.0, abs=0.6)
-    exchange(emu, command(Command.MOVE, 500), now)
-    now = _run(emu, 0.8, now)
+    exchange(emu, command(Command.MOVE, 500), clock.now())
+    _run(emu, clock, 3.5)  # 0.5 m at up to 0.75 m/s, 0.3 m/s^2
     x, y, th = emu.actuator.odometry()
     assert (x, y) == pytest.approx((0.0, 0.5), abs=0.01)
-    sip = parse_sip([p for p in exchange(emu, b"", now + 0.2) if is_sip(p)][-1])
+    sip = parse_sip([p for p in later(emu, clock, 0.2) if is_sip(p)][-1])
     assert not sip.moving and sip.y == pytest.approx(500, abs=10)
-    exchange(emu, command(Command.DHEAD, -45), now)
-    now = _run(emu, 0.5, now)
+    exchange(emu, command(Command.DHEAD, -45), clock.now())
+    _run(emu, clock, 1.5)
     assert math.degrees(emu.actuator.odometry()[2]) == pytest.approx(45.0, abs=0.6)
-    exchange(emu, command(Command.SETO), now)
-    sip = parse_sip([p for p in exchange(emu, b"", now + 0.2) if is_sip(p)][-1])
+    exchange(emu, command(Command.SETO), clock.now())
+    # the next SIP, before the robot moved on: the firmware's SIP clock jumps, the robot's not
+    sip = parse_sip([p for p in exchange(emu, b"", clock.now() + 0.2) if is_sip(p)][-1])
     assert (sip.x, sip.y, sip.th) == (0, 0, 0)
 
 
 def test_watchdog_halts_after_two_silent_seconds_and_resumes_on_traffic() -> None:
-    emu, now = opened()
-    exchange(emu, command(Command.ENABLE, 1) + command(Command.SETA, 10000), now)
-    exchange(emu, command(Command.VEL, 300), now)
-    time.sleep(0.05)
-    exchange(emu, b"", now + 0.1)
+    emu, clock = opened()
+    exchange(emu, command(Command.ENABLE, 1) + command(Command.SETA, 10000), clock.now())
+    exchange(emu, command(Command.VEL, 300), clock.now())
+    later(emu, clock, 0.1)
     assert emu.actuator.velocity[0] == pytest.approx(0.3)
-    exchange(emu, b"", now + 1.9)
+    later(emu, clock, 1.8)  # 1.9 s of silence
     assert not emu.watchdog_tripped
-    exchange(emu, b"", now + 2.1)
+    later(emu, clock, 0.2)  # 2.1 s
     assert emu.watchdog_tripped and emu.actuator.velocity == (0.0, 0.0)
-    sips = exchange(emu, b"", now + 2.3)
+    stopped_at = emu.actuator.odometry()
+    sips = later(emu, clock, 0.2)
     assert sips, "SIPs keep coming while the watchdog holds the wheels"
-    exchange(emu, command(Command.PULSE), now + 2.4)
-    time.sleep(0.05)
-    exchange(emu, b"", now + 2.45)
+    assert emu.actuator.odometry() == stopped_at
+    later(emu, clock, 0.1, command(Command.PULSE))
+    later(emu, clock, 0.05)
     assert not emu.watchdog_tripped and emu.actuator.velocity[0] == pytest.approx(0.3)
 
 
 def test_aux_tunnel_getaux_waits_for_n_bytes() -> None:
     echo = EchoDevice()
-    emu, now = opened(echo)
+    emu, clock = opened(echo)
+    now = clock.now()
     assert exchange(emu, command(Command.GETAUX, 6), now) == []
 
     def aux(data: bytes) -> list[bytes]:
@@ -197,7 +202,8 @@ def test_aux_tunnel_getaux_waits_for_n_bytes() -> None:
 
 
 def test_fault_knobs() -> None:
-    emu, now = opened()
+    emu, clock = opened()
+    now = clock.now()
     emu.faults.junk = b"noise"
     emu.faults.bad_checksum = 1
     emu.receive(command(Command.PULSE), now)
