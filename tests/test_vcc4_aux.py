@@ -1,6 +1,8 @@
 """The VC-C4 on the robot's AUX1 port: the driver's bytes tunnelled through the real ARCOS
 driver and the emulated ARCOS firmware (TTY2 out, GETAUX/SERAUX in, section A10) to the
-emulated camera moving the MuJoCo head."""
+emulated camera moving the MuJoCo head, end to end over a real pseudo-terminal in real time
+(the world at 4x the wall clock), as ``twin hw vcc4 --via-aux`` meets it. The same tunnel in
+virtual time, with the camera's real timings, is tests/test_arcos_aux_vcc4.py."""
 
 from __future__ import annotations
 

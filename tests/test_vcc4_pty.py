@@ -1,11 +1,15 @@
-"""The real VC-C4 driver against the emulator over a real pseudo-terminal, the emulator moving
-the MuJoCo robot's head while a ``WorldRunner`` steps the world at 4x wall-clock time."""
+"""The real VC-C4 driver against the emulator moving the MuJoCo robot's head.
+
+End to end over a real pseudo-terminal in real time (the world stepped at 4x the wall clock):
+a move, a line hung up and reopened, and the CLI. The rest runs on a ``MemoryLink`` in virtual
+time (``ManualClock``, the world at exactly real-time pace in it): the camera's 9600-baud
+answers, its busy spells and the driver's timeouts are exact there, whatever the machine's load.
+"""
 
 from __future__ import annotations
 
 import math
 import re
-import time
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -15,7 +19,9 @@ from hardware import vcc4_codec as codec
 from hardware.transport import SerialTransport
 from hardware.vcc4 import VCC4
 from twin.cli import main
+from twin.core.clock import ManualClock
 from twin.core.devices import ConnectionLostError, DeviceTimeoutError, ProtocolError
+from twin.serial_twins.memory import MemoryLink
 from twin.serial_twins.pty import PtyLink
 from twin.serial_twins.runner import WorldRunner
 from twin.serial_twins.vcc4 import VCC4Server, VCC4Timing, serve_vcc4
@@ -37,6 +43,25 @@ def server(sim: SimRobot, tmp_path: Path) -> Iterator[VCC4Server]:
     timing = VCC4Timing(power_seconds=0.2, init_seconds=0.2)
     with serve_vcc4(sim, PtyLink(tmp_path / "vcc4"), timing=timing, camera_on=False) as srv:
         yield srv
+
+
+@pytest.fixture(scope="module")
+def virtual_sim() -> Iterator[tuple[SimRobot, ManualClock]]:
+    clock = ManualClock()
+    robot, _ = make_sim_robot()
+    with WorldRunner(robot, clock=clock):
+        yield robot, clock
+
+
+@pytest.fixture
+def virtual(virtual_sim: tuple[SimRobot, ManualClock]) -> Iterator[tuple[VCC4Server, VCC4]]:
+    """An emulator with the real camera's timing on a memory line, and a driver on it."""
+    sim, clock = virtual_sim
+    link = MemoryLink(clock, "vcc4 line")
+    with serve_vcc4(sim, link, clock=clock) as srv:
+        camera = VCC4(opener=lambda: link.transport("VC-C4"), clock=clock)
+        yield srv, camera
+        camera.close()
 
 
 def test_move_to_reaches_the_angle_in_the_sim_left_positive(
@@ -75,29 +100,39 @@ def _top_pan_rate(sim: SimRobot, move: object) -> float:
     return max(rates)
 
 
-def test_speeds_are_respected(sim: SimRobot, server: VCC4Server) -> None:
-    with VCC4.open(server.path) as camera:
+def test_speeds_are_respected(
+    virtual_sim: tuple[SimRobot, ManualClock], virtual: tuple[VCC4Server, VCC4]
+) -> None:
+    sim, clock = virtual_sim
+    _, camera = virtual
+    with camera:
         camera.move_to(0.0, 0.0)
+        start = clock.now()
         slow = _top_pan_rate(sim, lambda: camera.move_to(math.radians(30), speed=math.radians(20)))
+        assert clock.now() - start >= 30 / 20  # 30 degrees at 20 deg/s
         fast = _top_pan_rate(sim, lambda: camera.move_to(0.0))
         assert math.radians(15) < slow < math.radians(20) * 1.05
         assert fast > math.radians(60)
 
 
-def test_a_silent_camera_is_a_timeout_not_a_hang(server: VCC4Server) -> None:
-    with VCC4.open(server.path, answer_timeout=0.3) as camera:
+def test_a_silent_camera_is_a_timeout_not_a_hang(virtual: tuple[VCC4Server, VCC4]) -> None:
+    server, camera = virtual
+    camera.answer_timeout = 0.3
+    with camera:
+        clock = camera.clock
         server.emulator.faults.silent = True
-        start = time.monotonic()
+        start = clock.now()
         with pytest.raises(DeviceTimeoutError, match=r"no answer within 0\.3 s"):
             camera.position()
-        assert time.monotonic() - start < 5.0  # 0.3 s answer timeouts, not a hang
+        assert clock.now() - start == pytest.approx(2 * 0.3)  # one resend, then the error
         server.emulator.faults.silent = False
         assert camera.position() == pytest.approx((0.0, 0.0), abs=TOLERANCE)
 
 
-def test_line_faults_are_recovered_or_typed(server: VCC4Server) -> None:
+def test_line_faults_are_recovered_or_typed(virtual: tuple[VCC4Server, VCC4]) -> None:
+    server, camera = virtual
     faults = server.emulator.faults
-    with VCC4.open(server.path) as camera:
+    with camera:
         faults.junk_count = 3
         camera.move_to(math.radians(5))
         faults.truncate_count, faults.garble_count = 1, 1
@@ -109,6 +144,16 @@ def test_line_faults_are_recovered_or_typed(server: VCC4Server) -> None:
         with pytest.raises(ProtocolError, match="garbled"):
             camera.position()
         assert camera.position()[0] == pytest.approx(math.radians(5), abs=TOLERANCE)
+
+
+def test_a_cut_memory_line_is_reopened_by_the_driver(virtual: tuple[VCC4Server, VCC4]) -> None:
+    server, camera = virtual
+    with camera:
+        camera.move_to(math.radians(10))
+        server.hangup()
+        assert camera.move_to(math.radians(-10))[0] == pytest.approx(
+            math.radians(-10), abs=TOLERANCE
+        )
 
 
 def test_hangup_mid_use_reopens_or_says_connection_lost(server: VCC4Server) -> None:
