@@ -2,19 +2,25 @@
 
 Gymnasium-style: the same tests run against the MuJoCo sim devices, the OpenCV camera on a real
 capture backend (a video file: no camera is attached here), and the serial hardware drivers
-talking to their emulators over pseudo-terminals. A new device type joins by adding a factory.
+talking to their emulators (the serial twins, on lines in memory, all on one ``ManualClock``:
+the drivers' timeouts and the world's pace are virtual seconds, so no result depends on the
+machine's speed; tests/test_vcc4_pty.py and test_arcos_driver.py keep the real-pty runs). A new
+device type joins by adding a factory. The clocks the drivers wait on have their contract too.
 """
 
 from __future__ import annotations
 
 import contextlib
 import math
+import threading
+import time
 from collections.abc import Callable, Iterator
 
 import cv2
 import numpy as np
 import pytest
 
+from twin.core.clock import Clock, ClockStalledError, ManualClock, SystemClock
 from twin.core.devices import Base, Camera, NotConnectedError, OutOfRangeError, PanTilt
 from twin.core.geometry import Pose2D
 
@@ -63,21 +69,30 @@ def opencv_camera(tmp_path) -> Iterator[Camera]:
 
 
 @contextlib.contextmanager
-def serial_twins(wiring: str = "direct", time_scale: float = 4.0) -> Iterator:
+def serial_twins(wiring: str = "direct") -> Iterator:
     from twin.serial_twins.session import SerialTwins
     from twin.sim import make_sim_robot
 
+    clock = ManualClock()
     sim, _ = make_sim_robot("living_room", start=Pose2D(2.5, 3.3, 0.0))
-    with SerialTwins(sim, time_scale=time_scale, vcc4_wiring=wiring) as twins:
-        yield sim, twins
+    with SerialTwins(sim, vcc4_wiring=wiring, clock=clock, lines="memory") as twins:
+        yield sim, twins, clock
+
+
+def plug(link: object, name: str):
+    """A driver's transport on a serial twin's memory line."""
+    from twin.serial_twins.memory import MemoryLink
+
+    assert isinstance(link, MemoryLink)
+    return link.transport(name)
 
 
 @contextlib.contextmanager
 def vcc4_on_its_line(tmp_path) -> Iterator[PanTilt]:
     from hardware.vcc4 import VCC4
 
-    with serial_twins() as (_, twins):
-        yield VCC4.open(twins.vcc4_path)
+    with serial_twins() as (_, twins, clock):
+        yield VCC4(opener=lambda: plug(twins.vcc4_link, "VC-C4"), clock=clock)
 
 
 @contextlib.contextmanager
@@ -85,17 +100,21 @@ def vcc4_on_the_aux_port(tmp_path) -> Iterator[PanTilt]:
     from hardware.arcos import ArcosBase
     from hardware.vcc4 import VCC4
 
-    with serial_twins("aux") as (_, twins), ArcosBase.open(twins.arcos_path) as base:
-        yield VCC4(base.aux_transport(1), answer_timeout=1.0)
+    with (
+        serial_twins("aux") as (_, twins, clock),
+        ArcosBase(lambda: plug(twins.arcos_link, "ARCOS base"), clock=clock) as base,
+    ):
+        yield VCC4(base.aux_transport(1), answer_timeout=1.0, clock=clock)
 
 
 @contextlib.contextmanager
 def arcos_base(tmp_path) -> Iterator[Base]:
     from hardware.arcos import ArcosBase
 
-    # Real time: a drive's duration is wall-clock time on the driver's side.
-    with serial_twins(time_scale=1.0) as (sim, twins):
-        yield ArcosBase.open(twins.arcos_path, start=sim.truth_pose())
+    with serial_twins() as (sim, twins, clock):
+        yield ArcosBase(
+            lambda: plug(twins.arcos_link, "ARCOS base"), start=sim.truth_pose(), clock=clock
+        )
 
 
 CAMERAS = {"sim": sim_camera, "opencv": opencv_camera}
@@ -229,3 +248,85 @@ def test_a_base_goes_to_a_pose_within_5_cm_and_3_degrees(base):
     for got in (final, pose):
         assert got.distance_to(goal) < 0.05
         assert abs(got.heading_error_to(goal)) < math.radians(3.0)
+
+
+# -- clocks ----------------------------------------------------------------------------------------
+
+CLOCKS = {"system": SystemClock, "manual": ManualClock}
+# The system clock's timed waits may end a timer tick early; a manual clock's end exactly.
+EARLY = {"system": 0.005, "manual": 0.0}
+
+
+@pytest.fixture(params=sorted(CLOCKS))
+def clock(request) -> Iterator[tuple[Clock, float]]:
+    yield CLOCKS[request.param](), EARLY[request.param]
+
+
+def test_a_clock_sleeps_forward_and_never_back(clock):
+    clock, early = clock
+    start = clock.now()
+    clock.sleep(0.02)
+    after = clock.now()
+    assert after - start >= 0.02 - early
+    clock.sleep(0.0)
+    clock.sleep(-1.0)  # nothing to wait for
+    assert clock.now() >= after
+
+
+def test_a_clock_condition_times_out_or_is_notified_and_its_threads_join(clock):
+    clock, early = clock
+    cond = clock.condition()
+    with cond:
+        start = clock.now()
+        assert cond.wait(0.05) is False
+        assert clock.now() - start >= 0.05 - early
+    box: list[float] = []
+
+    def notify_later() -> None:
+        clock.sleep(0.02)
+        with cond:
+            box.append(clock.now())
+            cond.notify_all()
+
+    thread = clock.start_thread(notify_later, "notifier")
+    with cond:
+        assert cond.wait_for(lambda: bool(box), 5.0)
+    assert clock.join(thread, 5.0) and not thread.is_alive()
+    with pytest.raises(RuntimeError):
+        cond.notify_all()  # only while holding its lock, as threading.Condition
+
+
+def test_manual_time_stands_still_while_a_thread_of_it_runs() -> None:
+    """A reader thread that the machine starves (here: 20 ms of real work per tick) still gets
+    every tick before the caller's wait ends: no timeout can fire because a thread was slow."""
+    clock = ManualClock()
+    cond = clock.condition()
+    ticks: list[float] = []
+
+    def starved_reader() -> None:
+        for _ in range(5):
+            clock.sleep(0.1)
+            time.sleep(0.02)
+            with cond:
+                ticks.append(clock.now())
+                cond.notify_all()
+
+    thread = clock.start_thread(starved_reader, "reader")
+    clock.sleep(0.25)
+    assert ticks == pytest.approx([0.1, 0.2])
+    with cond:  # the fifth tick is due at 0.5, within this wait's 0.3 s
+        assert cond.wait_for(lambda: len(ticks) == 5, 0.3)
+        assert clock.now() == pytest.approx(0.5)
+    assert clock.join(thread, 1.0) and clock.now() == pytest.approx(0.5)
+
+
+def test_manual_clock_names_a_thread_that_blocks_outside_it() -> None:
+    clock = ManualClock(stall_timeout=0.2)
+    gate = threading.Event()
+    thread = clock.start_thread(lambda: gate.wait(10.0), "stuck-in-a-real-wait")
+    try:
+        with pytest.raises(ClockStalledError, match="stuck-in-a-real-wait"):
+            clock.sleep(1.0)
+    finally:
+        gate.set()
+    assert clock.join(thread, 1.0)
