@@ -180,3 +180,26 @@ def test_a_batch_out_that_is_not_a_batch_is_refused(tmp_path, tiny, capsys):
     assert code == 2 and len(err.splitlines()) == 1
     assert "holds files that are not a twin batch-survey (e.g. notes.txt)" in err
     assert [p.name for p in tmp_path.iterdir()] == ["notes.txt"]
+
+
+def test_an_interrupted_batch_summarizes_the_runs_it_finished(tmp_path, tiny, monkeypatch):
+    import twin.app.batch as batch
+
+    real = batch.run_batch_mission
+
+    def second_run_interrupted(spec, run):
+        if run == 1:
+            raise KeyboardInterrupt
+        return real(spec, run)
+
+    monkeypatch.setattr(batch, "run_batch_mission", second_run_interrupted)
+    out = tmp_path / "b"
+    argv = ["batch-survey", "--runs", "3", "--seed", "4", *set_args(tiny), "--out", str(out),
+            "--workers", "1", "--quiet"]  # fmt: skip
+    assert main(argv) == 130
+    assert sorted(runs(out)) == [0]
+    with (out / "summary.csv").open() as handle:
+        assert [int(r["run"]) for r in csv.DictReader(handle)] == [0]
+    monkeypatch.setattr(batch, "run_batch_mission", real)
+    assert main(argv) == 0  # the same command finishes the batch
+    assert sorted(runs(out)) == [0, 1, 2]
