@@ -241,12 +241,10 @@ def draw_trial(config: SweepConfig, rng: np.random.Generator) -> TrialDraws:
 
 
 @njit(cache=True)
-def _wedge_meets_cell(px, py, a0, a1, col, row) -> bool:
-    """Whether the wedge [a0, a1] from (px, py) meets the unit cell (col, row), exactly.
-
-    The robot is outside the cell, so the cell's corners span less than pi as seen from it;
-    the wedge meets the cell iff that span overlaps the wedge's span (modulo 2 pi).
-    """
+def _cell_span(px, py, col, row):
+    """The unit cell (col, row) as seen from (px, py): the bearing of its centre and the least
+    and greatest offsets of its corners' bearings from it (radians; the same for every wedge
+    of a view, so computed once per view)."""
     centre = math.atan2(row + 0.5 - py, col + 0.5 - px)
     lo = math.inf
     hi = -math.inf
@@ -255,12 +253,29 @@ def _wedge_meets_cell(px, py, a0, a1, col, row) -> bool:
             d = (math.atan2(cy - py, cx - px) - centre + math.pi) % (2.0 * math.pi) - math.pi
             lo = min(lo, d)
             hi = max(hi, d)
+    return centre, lo, hi
+
+
+@njit(cache=True)
+def _span_meets_wedge(centre, lo, hi, a0, a1) -> bool:
+    """Whether the wedge [a0, a1] overlaps the span ``_cell_span`` gives (modulo 2 pi)."""
     start = (a0 - centre + math.pi) % (2.0 * math.pi) - math.pi
     width = a1 - a0
     for shift in (-2.0 * math.pi, 0.0, 2.0 * math.pi):
         if start + shift < hi and start + shift + width > lo:
             return True
     return False
+
+
+@njit(cache=True)
+def _wedge_meets_cell(px, py, a0, a1, col, row) -> bool:
+    """Whether the wedge [a0, a1] from (px, py) meets the unit cell (col, row), exactly.
+
+    The robot is outside the cell, so the cell's corners span less than pi as seen from it;
+    the wedge meets the cell iff that span overlaps the wedge's span (modulo 2 pi).
+    """
+    centre, lo, hi = _cell_span(px, py, col, row)
+    return _span_meets_wedge(centre, lo, hi, a0, a1)
 
 
 @njit(cache=True)
@@ -310,10 +325,11 @@ def _run_trial(
     wedge = fov / n_wedges
     c = 0
     for v in range(xs.shape[0]):
+        centre, lo, hi = _cell_span(xs[v], ys[v], object_col, object_row)
         for w in range(n_wedges):
             a1[w] = yaws[v] + 0.5 * fov - w * wedge
             a0[w] = a1[w] - wedge
-            hit = _wedge_meets_cell(xs[v], ys[v], a0[w], a1[w], object_col, object_row)
+            hit = _span_meets_wedge(centre, lo, hi, a0[w], a1[w])
             fired = 1 if fire_u[v, w] < ((1.0 - pfn) if hit else pfp) else 0
             for k in range(n_layers):
                 weights[k, w] = layer_weights[k, fired]
