@@ -54,6 +54,8 @@ SERVER_START_TIMEOUT = 10.0  # seconds for the Rerun server to listen
 SERVER_STOP_TIMEOUT = 5.0  # seconds between SIGTERM and SIGKILL for the server's group
 VIEWER_FLUSH_TIMEOUT = 10.0  # seconds a viewer may take to accept a view before it is left behind
 STRONG_MATCH = 0.5  # an RFCH score that is a clear detection (rendered frames rarely pass it)
+TYPICAL_MATCH = 0.25  # what the object's patches score in rendered frames (the ROC cut: 0.16)
+COLUMNS_PER_CELL = 2  # RFCH's patches overlap by half: two patch columns cover each bearing
 SCORE_LEVELS = 32  # steps of the camera's score overlay, from 0 to STRONG_MATCH
 SCORE_ALPHA = 190  # overlay opacity (of 255) from STRONG_MATCH up; a patch scoring 0 is clear
 VIEWS_PER_SWEEP = 8  # views in a full turn of a 45-degree camera; see colour_scale
@@ -155,9 +157,10 @@ def heat_colors(values: np.ndarray, alpha: int | np.ndarray | None = None) -> np
 
 
 def nice_ceil(value: float) -> float:
-    """The smallest of 1, 2, 2.5, 5 times a power of ten that is >= ``value`` (> 0)."""
+    """The smallest of 1, 1.5, 2, 2.5, 3, 4, 5, 6 or 8 times a power of ten that is >= ``value``
+    (> 0): a scale's top that reads as a round number."""
     power = 10.0 ** math.floor(math.log10(value))
-    for step in (1.0, 2.0, 2.5, 5.0, 10.0):
+    for step in (1.0, 1.5, 2.0, 2.5, 3.0, 4.0, 5.0, 6.0, 8.0, 10.0):
         if step * power >= value * (1.0 - 1e-12):
             return step * power
     return 10.0 * power  # not reached: 10 * power >= value always
@@ -189,12 +192,13 @@ def colour_scale(rule: FusionRule, planned_views: int) -> ColourScale:
 
     A camera with a 45-degree field of view sees a given cell in about one of the
     ``VIEWS_PER_SWEEP`` views of a full turn, so a mission holds ``planned_views / 8`` looks at
-    the object. ``accumulate`` adds a column's match per look: the top of the scale is a strong
-    match (``STRONG_MATCH``) at every look; ``normalized`` is a mean match, 0 to a strong one;
-    ``logodds`` is symmetric about 0, its top what a detector with the rule's miss rate gathers
-    at every look. Tops are rounded up to 1, 2, 2.5 or 5 times a power of ten.
+    the object, and in each look ``COLUMNS_PER_CELL`` patch columns cover its cell. The top of
+    the scale is what the object's cell gathers over the mission: ``accumulate``, a typical
+    match (``TYPICAL_MATCH``) per column and look; ``logodds`` (symmetric about 0), the expected
+    weight of a detector with the rule's miss rate; ``normalized`` is a mean match, 0 to a
+    strong one (``STRONG_MATCH``). Tops are rounded up by ``nice_ceil``; a clear peak saturates.
     """
-    looks = max(1.0, planned_views / VIEWS_PER_SWEEP)
+    looks = max(1.0, planned_views / VIEWS_PER_SWEEP) * COLUMNS_PER_CELL
     if rule.name == "normalized":
         return ColourScale(0.0, STRONG_MATCH, "viridis")
     if rule.name == "logodds":
@@ -203,7 +207,7 @@ def colour_scale(rule: FusionRule, planned_views: int) -> ColourScale:
         missed = float(getattr(rule, "p_fn", 0.0))
         top = nice_ceil(max(1.0, looks * ((1.0 - missed) * fired + missed * silent)))
         return ColourScale(-top, top, "cyantoyellow")
-    return ColourScale(0.0, nice_ceil(STRONG_MATCH * looks), "viridis")
+    return ColourScale(0.0, nice_ceil(TYPICAL_MATCH * looks), "viridis")
 
 
 def clip_to_rect(polygon: np.ndarray, extent: tuple[float, float, float, float]) -> np.ndarray:
@@ -814,7 +818,7 @@ class RerunRecorder:
             ),
             static=True,
         )
-        key_x, step = x1 + 0.5, 0.45
+        key_x, step = x1 + 0.75, 0.45
         keys = [
             ("truth (ring)", [255, 70, 70]),
             ("estimate (white square)", [150, 150, 150]),
