@@ -6,10 +6,14 @@ import io
 from collections.abc import Sequence
 from functools import lru_cache
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from twin.core.store import write_atomic
+
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
 
 
 def _pyplot():
@@ -117,7 +121,7 @@ def draw_figure3(
     pfp: Sequence[float],
     pfn: Sequence[float],
     views: Sequence[int],
-):
+) -> Figure:
     """The paper's Figure 3 as a figure to read numbers off: one heat map per rule (row) and
     view count (column), P_fp across, P_fn up, one fixed 0-100 % colour scale, and the success
     (%) printed in every cell. When one rate axis holds a single rate the panels are curves."""
@@ -202,10 +206,11 @@ def _diagonal_triangles(nx: int, ny: int) -> np.ndarray:
 
     A grid quad whose corners do not lie in one plane (a success surface bends across most
     cells) has no flat face: mplot3d fills the quad's 2-D projection, whose edges cross at this
-    view (saw teeth), and sorts it by one mean depth, so it is painted over nearer faces.
-    Triangles are flat. This diagonal runs across the line of sight of the (0, 0)-corner view,
-    so each cell's far triangle lies wholly behind its near one, and it follows the
-    P_fp + P_fn = const ridges and valleys of the data rather than cutting through them.
+    view (saw teeth), and orders polygons by their mean depth alone, which puts a large bent
+    quad in front of faces nearer the eye. Triangles are flat. This diagonal runs across the
+    line of sight of the (0, 0)-corner view, so each cell's far triangle lies wholly behind its
+    near one, and it follows the P_fp + P_fn = const ridges and valleys of the data rather than
+    cutting through them.
     """
     i, j = np.meshgrid(np.arange(nx - 1), np.arange(ny - 1))
     a = (j * nx + i).ravel()
@@ -219,7 +224,7 @@ def draw_figure3_3d(
     pfp: Sequence[float],
     pfn: Sequence[float],
     views: Sequence[int],
-):
+) -> Figure | None:
     """The paper's look: success (%) as a surface over P_fp x P_fn, a panel per rule and view
     count, drawn as flat triangles (see ``_diagonal_triangles``). None when one rate axis holds
     a single rate: there is no surface, and ``draw_figure3`` draws the curves."""
