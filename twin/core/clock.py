@@ -234,8 +234,10 @@ class ManualClock:
             with self._lock:
                 if waiter.released.is_set():
                     return
-                gone = {t for t in self._threads if not t.is_alive()}
-                if gone:  # threads started elsewhere that ended without waiting again
+                # threads started elsewhere that ended without waiting again (the clock's own
+                # leave in start_thread's wrapper; one not started yet is not alive either)
+                gone = {t for t in self._threads - self._started if not t.is_alive()}
+                if gone:
                     self._threads -= gone
                     self._step()
                     continue
