@@ -85,7 +85,8 @@ def synthetic_views(grid: AccumulatorGrid, n_views: int):
         wedges = camera.wedges(pose, 0.0, spans)
         bearing = math.atan2(TARGET[1] - y, TARGET[0] - x)
         offset = (bearing - wedges[:, 0]) % (2.0 * math.pi)
-        values = np.where(offset <= wedges[:, 1] - wedges[:, 0], 0.45, 0.04)
+        # A typical match (TYPICAL_MATCH): the peak stays under the scale's top, unsaturated.
+        values = np.where(offset <= wedges[:, 1] - wedges[:, 0], 0.25, 0.04)
         scores = values[None, :] * np.linspace(0.5, 1.0, boxes.shape[0])[:, None]
         grid.fuse_all((x, y), wedges, {NAME: scores.max(axis=0)})
         record = ViewRecord(
