@@ -17,13 +17,13 @@ was seen, and what to do.
 from __future__ import annotations
 
 import math
-import time
 from abc import ABC, abstractmethod
 from dataclasses import dataclass
 from types import TracebackType
 
 import numpy as np
 
+from twin.core.clock import SYSTEM_CLOCK
 from twin.core.errors import TwinError
 from twin.core.geometry import CameraModel, Pose2D, require_finite
 
@@ -72,7 +72,7 @@ class ConnectionLostError(DeviceError):
 @dataclass(frozen=True)
 class Frame:
     """One camera image: H x W x 3 uint8 RGB, row 0 at the top; ``timestamp`` in seconds on
-    the robot's clock (simulated time in the twin, ``time.monotonic()`` on hardware)."""
+    the robot's clock (simulated time in the twin, the driver's ``twin.core.clock`` on hardware)."""
 
     image: np.ndarray
     timestamp: float
@@ -198,8 +198,9 @@ class Camera(Device):
 
     def now(self) -> float:
         """The robot's clock, in seconds: the one frame timestamps are read on (simulated time
-        in the twin). A mission times its views on it, so a resumed run's clock continues."""
-        return time.monotonic()
+        in the twin, the driver's clock on hardware). A mission times its views on it, so a
+        resumed run's clock continues. This default is the system's monotonic clock."""
+        return SYSTEM_CLOCK.now()
 
 
 class PanTilt(Device):
