@@ -378,7 +378,9 @@ def test_patch_scores_are_a_translucent_overlay(survey) -> None:
     entity = f"/world/robot/camera/image/scores/{NAME}"
     image = rec.latest(entity, "SegmentationImage:buffer", 0)
     fmt = rec.latest(entity, "SegmentationImage:format", 0)[0]
-    assert (fmt["height"], fmt["width"]) == record.view.image.shape[:2]
+    corner = [[fmt["width"], fmt["height"]]]  # the far corner of the overlay's pixels
+    drawn = to_origin(rec, entity, "/world/robot/camera/image", np.array(corner, float), 0)
+    assert np.allclose(drawn[0], record.view.image.shape[1::-1])  # it covers the frame
     classes = rec.latest("/world/robot/camera/image/scores", "AnnotationContext:context", 0)
     alpha = {c["class_id"]: c["class_description"]["info"]["color"] & 0xFF for c in classes[0]}
     assert alpha[0] == 0 and 0 < max(alpha.values()) < 255

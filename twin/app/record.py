@@ -257,20 +257,26 @@ def wedge_polygons(
     return out
 
 
-def score_levels(boxes: np.ndarray, scores: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
-    """(height, width) uint8 class ids 0..SCORE_LEVELS: every pixel's highest patch score
-    (patches overlap when the stride is smaller than the patch), in steps of
-    STRONG_MATCH / SCORE_LEVELS, saturating at STRONG_MATCH."""
+def score_levels(
+    boxes: np.ndarray, scores: np.ndarray, shape: tuple[int, int]
+) -> tuple[np.ndarray, int]:
+    """Every pixel's highest patch score (patches overlap when the stride is smaller than the
+    patch) as uint8 class ids 0..SCORE_LEVELS, in steps of STRONG_MATCH / SCORE_LEVELS and
+    saturating at STRONG_MATCH; and the block size in pixels the map is given in.
+
+    The map is constant over blocks of the largest size that divides every box edge and the
+    frame (16 px for RFCH's 32/16 patches), so it is returned one value per block: 256 times
+    smaller than per pixel, drawn scaled back up by the block size."""
     height, width = shape
+    edges = np.asarray(boxes, dtype=np.int64).reshape(-1, 4)
+    block = math.gcd(height, width, *(int(v) for v in np.unique(edges)))
     unit = np.clip(np.asarray(scores, float) / STRONG_MATCH, 0.0, 1.0)
     levels = np.rint(unit * SCORE_LEVELS).astype(np.uint8)
-    out = np.zeros((height, width), np.uint8)
-    for (bx0, by0, bx1, by1), level in zip(
-        np.asarray(boxes).reshape(-1, 4), levels.reshape(-1), strict=True
-    ):
-        region = out[max(by0, 0) : min(by1, height), max(bx0, 0) : min(bx1, width)]
+    out = np.zeros((height // block, width // block), np.uint8)
+    for (bx0, by0, bx1, by1), level in zip(edges // block, levels.reshape(-1), strict=True):
+        region = out[max(by0, 0) : max(by1, 0), max(bx0, 0) : max(bx1, 0)]
         np.maximum(region, level, out=region)
-    return out
+    return out, block
 
 
 def path_points(record: ViewRecord, seen: list[tuple[float, float]]) -> list[tuple[float, float]]:
@@ -870,14 +876,10 @@ class RerunRecorder:
             rr.Image(image, color_model="RGB").compress(jpeg_quality=JPEG_QUALITY),
         )
         for name, scores in record.scores.items():
-            log(
-                f"world/robot/camera/image/scores/{name}",
-                rr.SegmentationImage(
-                    score_levels(record.patch_boxes, scores, image.shape[:2]),
-                    opacity=1.0,
-                    draw_order=10.0,
-                ),
-            )
+            levels, block = score_levels(record.patch_boxes, scores, image.shape[:2])
+            overlay = f"world/robot/camera/image/scores/{name}"
+            log(overlay, rr.Transform3D(scale=[block, block, 1.0]))
+            log(overlay, rr.SegmentationImage(levels, opacity=1.0, draw_order=10.0))
 
     def _log_wedges(
         self, name: str, origin: tuple[float, float], wedges: np.ndarray, values: np.ndarray
