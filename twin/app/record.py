@@ -35,7 +35,7 @@ import subprocess
 import sys
 import tempfile
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Protocol
@@ -336,23 +336,22 @@ def _rerun_command() -> list[str]:
     return [sys.executable, "-m", "rerun"]
 
 
-def _die_with_parent() -> Callable[[], None] | None:
-    """On Linux, a pre-exec hook that has the kernel SIGTERM the child when this process dies
-    (even by SIGKILL), so that a killed survey leaves no server behind."""
-    if not sys.platform.startswith("linux"):
-        return None
-    import ctypes
+# Run by a fresh interpreter (one thread, so no pre-exec hook in this threaded process): ask the
+# kernel to SIGTERM it when its parent dies, check that the parent is still the survey, then
+# become the server. PR_SET_PDEATHSIG (1) survives the exec.
+_EXEC_DYING_WITH_PARENT = (
+    "import ctypes, os, sys; ctypes.CDLL(None).prctl(1, 15, 0, 0, 0); "
+    "os.getppid() == int(sys.argv[1]) or sys.exit(1); os.execv(sys.argv[2], sys.argv[2:])"
+)
 
-    libc = ctypes.CDLL(None, use_errno=True)
-    parent = os.getpid()
-    pr_set_pdeathsig = 1
 
-    def arm() -> None:
-        libc.prctl(pr_set_pdeathsig, int(signal.SIGTERM), 0, 0, 0)
-        if os.getppid() != parent:  # the parent died before the hook was armed
-            os._exit(1)
-
-    return arm
+def _server_command(arguments: Sequence[str]) -> list[str]:
+    """The Rerun server's command; on Linux it dies with this process (even by SIGKILL), so a
+    killed survey leaves no server behind."""
+    command = [*_rerun_command(), *arguments]
+    if not sys.platform.startswith("linux") or not os.path.isabs(command[0]):
+        return command
+    return [sys.executable, "-c", _EXEC_DYING_WITH_PARENT, str(os.getpid()), *command]
 
 
 def _fsync(path: Path) -> None:
@@ -581,16 +580,17 @@ class RerunRecorder:
         return self._server.pid if self._server is not None else None
 
     def _start_server(self, bind: str, port: int) -> str:
-        command = [
-            *_rerun_command(),
-            "--serve-grpc",
-            "--bind",
-            bind,
-            "--port",
-            str(port),
-            "--server-memory-limit",
-            VIEWER_MEMORY_LIMIT,
-        ]
+        command = _server_command(
+            [
+                "--serve-grpc",
+                "--bind",
+                bind,
+                "--port",
+                str(port),
+                "--server-memory-limit",
+                VIEWER_MEMORY_LIMIT,
+            ]
+        )
         host = "127.0.0.1" if bind in ("0.0.0.0", "::", "127.0.0.1") else bind
         with tempfile.TemporaryFile() as log:
             self._server = subprocess.Popen(
@@ -599,7 +599,6 @@ class RerunRecorder:
                 stdout=subprocess.DEVNULL,
                 stderr=log,
                 start_new_session=True,
-                preexec_fn=_die_with_parent(),
             )
             atexit.register(self._stop_server)
             deadline = time.monotonic() + SERVER_START_TIMEOUT
