@@ -39,7 +39,7 @@ from twin.app.record import (
     wedge_polygons,
 )
 from twin.core.devices import View
-from twin.core.fusion import Accumulate, Normalized
+from twin.core.fusion import Accumulate, LogOdds, Normalized
 from twin.core.geometry import CameraModel, Footprint, Pose2D
 from twin.core.grid import AccumulatorGrid, GridSpec
 
@@ -325,7 +325,8 @@ def test_scales_follow_the_rule_and_the_plan() -> None:
     assert (colour_scale(Accumulate(), 40).lo, colour_scale(Accumulate(), 40).hi) == (0.0, 2.5)
     assert colour_scale(Accumulate(), 160).hi == 10.0
     assert colour_scale(Normalized(), 40).hi == 0.5
-    assert make_grid(Normalized()).rule.name == "normalized"
+    logodds = colour_scale(LogOdds(p_fp=0.1, p_fn=0.05, threshold=0.162), 40)
+    assert (logodds.lo, logodds.hi) == (-20.0, 20.0)  # 10 looks at ~2 log-odds each
 
 
 def test_wedges_stay_inside_the_room(survey) -> None:
