@@ -325,6 +325,55 @@ def test_the_recording_holds_the_expected_entities(reduced_run):
     assert any("GridMap" in a for a in archetypes) and any("Pinhole" in a for a in archetypes)
 
 
+def test_the_grid_as_the_viewer_draws_it_is_brightest_at_the_estimate(reduced_run):
+    """Read the real survey's recording the way Rerun draws it (a GridMap's row 0 at the top, a
+    2-D view's y down) and find the brightest cell: it must sit on the estimate, in every
+    picture of the grid, not mirrored to the other end of the room."""
+    from test_record import brightest, drawn_grids, read_recording
+
+    estimate = read_result(reduced_run)["objects"]["rice_box"]["estimate_m"]
+    pictures = drawn_grids(read_recording(reduced_run / "recording.rrd"), view=23)
+    assert {p.kind for p in pictures} == {"DepthImage", "GridMap"}
+    for picture in pictures:
+        assert math.dist(brightest(picture), estimate) < 0.15, picture.entity
+
+
+def test_ctrl_c_while_serving_the_results_stops_the_server_and_exits_130(tmp_path, model_cache):
+    out = tmp_path / "run"
+    sets = ("mission.stops=[[2.5, 3.3]]", "mission.views_per_stop=2")
+    argv = survey_argv(out, model_cache, *sets, rerun="serve")
+    process = subprocess.Popen(
+        [sys.executable, "-m", "twin.cli", *argv],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True,
+        env={**os.environ, "MUJOCO_GL": "egl"},
+    )  # fmt: skip
+    assert "serving the recording" in process.stdout.readline()
+    server_groups = {
+        int(line.split()[0])
+        for line in subprocess.run(
+            ["ps", "-o", "pgid=,args=", "-A"], capture_output=True, text=True
+        ).stdout.splitlines()
+        if "serve-grpc" in line
+    } - {os.getpgid(0)}
+    os.killpg(process.pid, signal.SIGINT)  # what a terminal's Ctrl-C sends to the job
+    _, err = process.communicate(timeout=60)
+    assert process.returncode == 130, err
+    assert "Traceback" not in err and err.strip().endswith("interrupted")
+    assert read_result(out)["status"] == "complete"
+    deadline = time.monotonic() + 15
+    while any(group_alive(g) for g in server_groups):
+        assert time.monotonic() < deadline, "the Rerun server outlived the survey"
+        time.sleep(0.1)
+
+
+def group_alive(pgid: int) -> bool:
+    try:
+        os.killpg(pgid, 0)
+    except ProcessLookupError:
+        return False
+    return True
+
+
 def test_an_interrupted_survey_writes_its_results_and_resumes(
     tmp_path, model_cache, monkeypatch, reduced_run
 ):

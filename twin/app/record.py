@@ -43,7 +43,7 @@ from typing import Any, Protocol
 import numpy as np
 
 from twin.core.devices import View
-from twin.core.errors import Terminated, TwinError
+from twin.core.errors import TwinError
 from twin.core.fusion import FusionRule
 from twin.core.geometry import CameraModel, Footprint, Pose2D
 from twin.core.grid import AccumulatorGrid
@@ -556,8 +556,9 @@ class RerunRecorder:
                 self._stop_server()
 
     def wait(self) -> None:
-        """In ``serve`` mode the server holds the recording for viewers until Ctrl-C, which is
-        the normal end (no traceback, no error); a SIGTERM (``Terminated``) still propagates."""
+        """In ``serve`` mode the server holds the recording for viewers until Ctrl-C or SIGTERM,
+        which stop it (its whole process group) and propagate, so the command exits 130 / 143
+        like any interrupted one; the results were written before."""
         if self._server is None:
             return
         try:
@@ -565,12 +566,9 @@ class RerunRecorder:
                 f"Rerun server serving the recording at {self.url}; stop it with Ctrl-C", flush=True
             )
             self._server.wait()
-        except Terminated:
-            raise
-        except KeyboardInterrupt:
-            print("Rerun server stopped", flush=True)
         finally:
             self._stop_server()
+            print("Rerun server stopped", flush=True)
 
     # -- the server ----------------------------------------------------------------------------
 

@@ -365,7 +365,7 @@ def _scene_info(config: SurveyConfig, sim, truth) -> SceneInfo:
 
     world = sim.world if sim is not None else World(config.scene)
     furniture = tuple(world.footprints()[name] for name in world.furniture())
-    return SceneInfo(world.room_bounds(), furniture, dict(truth))
+    return SceneInfo(world.room_bounds(), furniture, dict(truth), config.grid.peak_separation)
 
 
 def _recorder(out: Path, options: RunOptions, resume: bool, say) -> Recorder:
