@@ -170,7 +170,7 @@ def test_shipped_configs_are_found_by_name_and_all_load():
 
 
 def test_an_unknown_config_name_lists_the_shipped_ones(tmp_path):
-    with pytest.raises(ConfigError, match="no shipped config of that name; shipped: .*peoplebot"):
+    with pytest.raises(ConfigError, match=r"no shipped config of that name; shipped: .*peoplebot"):
         resolve_config("kitchen")
     with pytest.raises(ConfigError, match="is a folder"):
         resolve_config(tmp_path)
@@ -226,5 +226,6 @@ def test_a_head_on_aux_needs_an_arcos_base_and_a_direct_head_needs_a_port():
 
 
 def test_bad_detector_parameters_are_named_at_load(tmp_path):
-    with pytest.raises(ConfigError, match=r"^--set detector.n_clusters: n_clusters must be an integer"):
+    message = r"^--set detector.n_clusters: n_clusters must be an integer"
+    with pytest.raises(ConfigError, match=message):
         load_config(None, overrides=["detector.n_clusters=many"])

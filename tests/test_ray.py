@@ -13,7 +13,7 @@ from twin.core.errors import InputError
 
 pytest.importorskip("ray")
 
-from test_batch import deterministic, spec_for, tiny_config
+from test_batch import deterministic, spec_for
 
 
 @pytest.fixture(scope="module")
@@ -43,8 +43,9 @@ def test_a_task_error_reaches_the_caller_as_itself(ray_executor):
 
 
 def test_a_ray_batch_equals_the_local_one(ray_executor, tmp_path):
-    config = tiny_config(tmp_path, tmp_path / "cache")
-    spec = spec_for(config, 2)
+    sets = ("mission.stops=[[2.5, 3.3]]", "mission.views_per_stop=2", "run.rerun=off",
+            f"run.cache={tmp_path / 'cache'}")  # fmt: skip
+    spec = spec_for(sets, 2)
     from twin.app.batch import prepare
 
     prepare(spec, lambda _: None)  # train once, as the command does
