@@ -25,16 +25,9 @@ the run as it was. Camera frames are JPEG-compressed and viewers get a memory li
 
 from __future__ import annotations
 
-import atexit
-import contextlib
 import math
 import os
-import signal
-import socket
-import subprocess
 import sys
-import tempfile
-import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -42,16 +35,14 @@ from typing import Any, Protocol
 
 import numpy as np
 
+from twin.app.rerun_server import VIEWER_MEMORY_LIMIT, RerunServer, has_display
 from twin.core.devices import View
 from twin.core.errors import TwinError
 from twin.core.fusion import FusionRule
 from twin.core.geometry import CameraModel, Footprint, Pose2D
 from twin.core.grid import AccumulatorGrid
 
-VIEWER_MEMORY_LIMIT = "1GiB"
 JPEG_QUALITY = 85
-SERVER_START_TIMEOUT = 10.0  # seconds for the Rerun server to listen
-SERVER_STOP_TIMEOUT = 5.0  # seconds between SIGTERM and SIGKILL for the server's group
 VIEWER_FLUSH_TIMEOUT = 10.0  # seconds a viewer may take to accept a view before it is left behind
 STRONG_MATCH = 0.5  # an RFCH score that is a clear detection (rendered frames rarely pass it)
 TYPICAL_MATCH = 0.25  # what the object's patches score in rendered frames (the ROC cut: 0.16)
@@ -298,60 +289,9 @@ def _score_label(level: int) -> str:
     return f"score >= {score:.2f}" if level == SCORE_LEVELS else f"score {score:.2f}"
 
 
-def has_display() -> bool:
-    """Whether a native viewer window can open (on Linux/BSD: an X11 or Wayland display)."""
-    if sys.platform.startswith(("linux", "freebsd", "openbsd", "netbsd")):
-        return bool(os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"))
-    return True
-
-
 def _ring(x: float, y: float, radius: float) -> np.ndarray:
     angles = np.linspace(0.0, 2.0 * math.pi, 33)
     return np.stack([x + radius * np.cos(angles), y + radius * np.sin(angles)], axis=1)
-
-
-def _free_port() -> int:
-    with socket.socket() as probe:
-        probe.bind(("127.0.0.1", 0))
-        return probe.getsockname()[1]
-
-
-def _rerun_command() -> list[str]:
-    """The bundled viewer binary itself, not the ``python -m rerun`` wrapper: the wrapper runs it
-    as a child that a signal to the wrapper orphans."""
-    try:
-        import rerun_cli
-    except ImportError:
-        return [sys.executable, "-m", "rerun"]
-    override = os.environ.get("RERUN_CLI_PATH")
-    folder = Path(rerun_cli.__file__).parent
-    suffix = ".exe" if sys.platform.startswith("win") else ""
-    for candidate in (
-        Path(override) if override else None,
-        folder / "Rerun.app" / "Contents" / "MacOS" / "Rerun",
-        folder / f"rerun{suffix}",
-    ):
-        if candidate is not None and candidate.is_file():
-            return [str(candidate)]
-    return [sys.executable, "-m", "rerun"]
-
-
-# Run by a fresh interpreter (one thread, so no pre-exec hook in this threaded process): ask the
-# kernel to SIGTERM it when its parent dies, check that the parent is still the survey, then
-# become the server. PR_SET_PDEATHSIG (1) survives the exec.
-_EXEC_DYING_WITH_PARENT = (
-    "import ctypes, os, sys; ctypes.CDLL(None).prctl(1, 15, 0, 0, 0); "
-    "os.getppid() == int(sys.argv[1]) or sys.exit(1); os.execv(sys.argv[2], sys.argv[2:])"
-)
-
-
-def _server_command(arguments: Sequence[str]) -> list[str]:
-    """The Rerun server's command; on Linux it dies with this process (even by SIGKILL), so a
-    killed survey leaves no server behind."""
-    command = [*_rerun_command(), *arguments]
-    if not sys.platform.startswith("linux") or not os.path.isabs(command[0]):
-        return command
-    return [sys.executable, "-c", _EXEC_DYING_WITH_PARENT, str(os.getpid()), *command]
 
 
 def _fsync(path: Path) -> None:
@@ -407,7 +347,7 @@ class RerunRecorder:
         self.mode = mode
         self.url: str | None = None
         self.file: Path | None = None
-        self._server: subprocess.Popen[bytes] | None = None
+        self._server: RerunServer | None = None
         self._viewer_lagging = False
         self._seen: list[tuple[float, float]] = []
         self._scales: dict[str, ColourScale] = {}
@@ -424,7 +364,8 @@ class RerunRecorder:
         elif mode == "spawn":
             self.stream.spawn(memory_limit=VIEWER_MEMORY_LIMIT)
         else:
-            self.url = self._start_server(bind, port or _free_port())
+            self._server = RerunServer(bind, port)
+            self.url = self._server.url
             self.stream.connect_grpc(self.url)
 
     # -- the Recorder protocol ---------------------------------------------------------------
@@ -552,8 +493,8 @@ class RerunRecorder:
             if self.file is not None:
                 _fsync(self.file)
         finally:
-            if interrupted:
-                self._stop_server()
+            if interrupted and self._server is not None:
+                self._server.stop()
 
     def wait(self) -> None:
         """In ``serve`` mode the server holds the recording for viewers until Ctrl-C or SIGTERM,
@@ -567,78 +508,12 @@ class RerunRecorder:
             )
             self._server.wait()
         finally:
-            self._stop_server()
             print("Rerun server stopped", flush=True)
-
-    # -- the server ----------------------------------------------------------------------------
 
     @property
     def server_pid(self) -> int | None:
-        """The server's process id (its process group's too), while it runs."""
+        """The ``serve`` server's process id (its process group's too), while it runs."""
         return self._server.pid if self._server is not None else None
-
-    def _start_server(self, bind: str, port: int) -> str:
-        command = _server_command(
-            [
-                "--serve-grpc",
-                "--bind",
-                bind,
-                "--port",
-                str(port),
-                "--server-memory-limit",
-                VIEWER_MEMORY_LIMIT,
-            ]
-        )
-        host = "127.0.0.1" if bind in ("0.0.0.0", "::", "127.0.0.1") else bind
-        with tempfile.TemporaryFile() as log:
-            self._server = subprocess.Popen(
-                command,
-                stdin=subprocess.DEVNULL,
-                stdout=subprocess.DEVNULL,
-                stderr=log,
-                start_new_session=True,
-            )
-            atexit.register(self._stop_server)
-            deadline = time.monotonic() + SERVER_START_TIMEOUT
-            while time.monotonic() < deadline:
-                if self._server.poll() is not None:
-                    self._stop_server()
-                    log.seek(0)
-                    said = log.read().decode(errors="replace").strip().splitlines()
-                    last = f" ({said[-1].strip()})" if said else ""
-                    raise TwinError(
-                        f"the Rerun server on {bind}:{port} exited{last}; is the port taken?"
-                    )
-                try:
-                    with socket.create_connection((host, port), timeout=0.2):
-                        return f"rerun+http://{host}:{port}/proxy"
-                except OSError:
-                    time.sleep(0.1)
-        self._stop_server()
-        raise TwinError(
-            f"the Rerun server on {bind}:{port} did not start within {SERVER_START_TIMEOUT:g} s"
-        )
-
-    def _stop_server(self) -> None:
-        """End the server's whole process group: SIGTERM, then SIGKILL if it lingers."""
-        server, self._server = self._server, None
-        if server is None:
-            return
-        atexit.unregister(self._stop_server)
-        if not hasattr(os, "killpg"):
-            server.terminate()
-            server.wait()
-            return
-        for sig in (signal.SIGTERM, signal.SIGKILL):
-            with contextlib.suppress(ProcessLookupError):
-                os.killpg(server.pid, sig)
-            try:
-                server.wait(timeout=SERVER_STOP_TIMEOUT)
-                break
-            except (subprocess.TimeoutExpired, KeyboardInterrupt):
-                continue
-        with contextlib.suppress(ProcessLookupError):  # anything the leader left behind
-            os.killpg(server.pid, signal.SIGKILL)
 
     # -- layout ----------------------------------------------------------------------------------
 
