@@ -439,3 +439,34 @@ def test_surface_cells_are_cut_along_the_diagonal_across_the_line_of_sight():
         halves = [set(t) for t in triangles if set(t) <= {i, i + 1, i + 3, i + 4}]
         assert halves == [{i, i + 1, i + 3}, {i + 1, i + 4, i + 3}]
         assert halves[0] & halves[1] == cut
+
+
+def test_a_folder_that_is_not_a_sweep_is_refused_never_written(tmp_path, capsys):
+    (tmp_path / "results.csv").write_text("someone else's")
+    code = main(["montecarlo", "--trials", "1", "--out", str(tmp_path), "--quiet"])
+    err = capsys.readouterr().err.strip()
+    assert code == 2 and len(err.splitlines()) == 1
+    assert "holds files that are not a twin montecarlo sweep (e.g. results.csv)" in err
+    assert [p.name for p in tmp_path.iterdir()] == ["results.csv"]
+
+
+def test_an_interrupted_sweep_command_writes_the_finished_settings(tmp_path, monkeypatch):
+    import twin.app.montecarlo as montecarlo
+
+    real = montecarlo.run_chunk
+
+    def interrupted_at_the_second_setting(config, chunk):
+        if (chunk.pfp, chunk.pfn) != (0.0, 0.0):
+            raise KeyboardInterrupt
+        return real(config, chunk)
+
+    monkeypatch.setattr(montecarlo, "run_chunk", interrupted_at_the_second_setting)
+    argv = ["montecarlo", "--pfp", "0,0.5", "--pfn", "0", "--trials", "3", "--views", "5",
+            "--workers", "1", "--out", str(tmp_path / "mc"), "--quiet"]  # fmt: skip
+    assert main(argv) == 130
+    with (tmp_path / "mc" / "results.csv").open() as handle:
+        assert {(r["pfp"], r["pfn"]) for r in csv.DictReader(handle)} == {("0.0", "0.0")}
+    monkeypatch.setattr(montecarlo, "run_chunk", real)
+    assert main(argv) == 0
+    with (tmp_path / "mc" / "results.csv").open() as handle:
+        assert {r["pfp"] for r in csv.DictReader(handle)} == {"0.0", "0.5"}

@@ -89,6 +89,7 @@ def run(args: argparse.Namespace) -> int:
         run_sweep,
         write_results_csv,
     )
+    from twin.app.outputs import check_output_folder, make_output_folder
     from twin.app.plots import figure3, figure3_3d
     from twin.core.errors import InputError
 
@@ -100,6 +101,10 @@ def run(args: argparse.Namespace) -> int:
     chunk = args.chunk if args.chunk is not None else DEFAULT_CHUNK_TRIALS
     if chunk < 1:
         raise InputError(f"--chunk must be at least 1 trial, got {chunk}")
+    check_output_folder(
+        args.out, "--out", lambda p: (p / JOURNAL_NAME).is_file(), "a twin montecarlo sweep"
+    )
+    make_output_folder(args.out, "--out")
     journal = SweepJournal(args.out / JOURNAL_NAME, config, fresh=args.fresh)
     total = len(config.settings())
     trials_done = sum(b - a for r in journal.ranges().values() for a, b in r)
@@ -119,6 +124,16 @@ def run(args: argparse.Namespace) -> int:
                 config, executor, journal, chunk_trials=chunk,
                 on_chunk=lambda c: bar.update(c.chunk.stop - c.chunk.start),
             )  # fmt: skip
+    except KeyboardInterrupt:
+        # The settings that finished are results: write them; the journal keeps the rest.
+        finished = [journal.done[s] for s in config.settings() if s in journal.done]
+        path = write_results_csv(args.out / "results.csv", result_rows(config, finished))
+        if not args.quiet:
+            print(
+                f"stopped with {len(finished)} of {total} settings done; wrote {path}; run the "
+                "same command to finish the sweep"
+            )
+        raise
     finally:
         executor.close()
     rows = result_rows(config, results)
