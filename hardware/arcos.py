@@ -27,7 +27,6 @@ import contextlib
 import math
 import threading
 from collections.abc import Callable
-from dataclasses import dataclass
 from typing import TypeVar
 
 from hardware.arcos_codec import (
@@ -45,7 +44,9 @@ from hardware.arcos_codec import (
 from hardware.transport import SerialTransport, Transport
 from twin.core.clock import SYSTEM_CLOCK, Clock
 from twin.core.devices import (
+    PIONEER_LIMITS,
     Base,
+    BaseLimits,
     ConnectionLostError,
     DeviceError,
     DeviceFaultError,
@@ -62,17 +63,6 @@ ORIGIN = Pose2D(0.0, 0.0, 0.0)
 AUX_PORTS = {1: (Command.TTY2, Command.GETAUX, 0xB0), 2: (66, 67, 0xB8), 3: (60, 61, 0xC8)}
 
 T = TypeVar("T")
-
-
-@dataclass(frozen=True)
-class ArcosLimits:
-    """Motion limits sent to the firmware at connect (SETV, SETA, SETRV, SETRA); also the
-    bounds ``drive`` accepts. SI units."""
-
-    speed: float = 0.5  # m/s
-    accel: float = 0.6  # m/s^2
-    turn_rate: float = math.radians(100.0)  # rad/s
-    turn_accel: float = math.radians(250.0)  # rad/s^2
 
 
 def _compose(a: Pose2D, b: Pose2D) -> Pose2D:
@@ -125,7 +115,7 @@ class ArcosBase(Base):
         *,
         name: str = "ARCOS base",
         start: Pose2D = ORIGIN,
-        limits: ArcosLimits = ArcosLimits(),
+        limits: BaseLimits = PIONEER_LIMITS,
         reply_timeout: float = 1.0,
         sync_attempts: int = 6,
         sip_timeout: float = 2.0,
@@ -615,17 +605,7 @@ class ArcosBase(Base):
 
     def drive(self, speed: float, turn_rate: float, duration: float) -> Pose2D:
         asked = f"drive {speed:.3f} m/s, {turn_rate:.3f} rad/s for {duration:g} s"
-        lim = self.limits
-        if not (
-            abs(speed) <= lim.speed and abs(turn_rate) <= lim.turn_rate and 0.0 <= duration <= 600.0
-        ):
-            raise OutOfRangeError(
-                self.name,
-                asked,
-                f"limits are |speed| <= {lim.speed} m/s, "
-                f"|turn rate| <= {lim.turn_rate:.2f} rad/s, 0..600 s",
-                "use smaller values",
-            )
+        self.limits.check_drive(self.name, speed, turn_rate, duration)
         self._require_link(asked)
         clock = self.clock
         start = clock.now()

@@ -131,6 +131,39 @@ class PanTiltLimits:
             )
 
 
+@dataclass(frozen=True)
+class BaseLimits:
+    """Speed and acceleration limits of a mobile base (SI units): what a base's controller or
+    firmware is set to, and the bounds ``Base.drive`` accepts. The defaults are the Pioneer
+    class's, gentle indoors."""
+
+    speed: float = 0.5  # m/s
+    accel: float = 0.6  # m/s^2
+    turn_rate: float = math.radians(100.0)  # rad/s
+    turn_accel: float = math.radians(250.0)  # rad/s^2
+    max_duration: float = 600.0  # s: the longest timed drive
+
+    def check_drive(self, device: str, speed: float, turn_rate: float, duration: float) -> None:
+        """Raise ``OutOfRangeError`` unless a timed drive is within the limits."""
+        asked = f"drive {speed:.3f} m/s, {turn_rate:.3f} rad/s for {duration:g} s"
+        if not (
+            abs(speed) <= self.speed
+            and abs(turn_rate) <= self.turn_rate
+            and 0.0 <= duration <= self.max_duration
+        ):
+            raise OutOfRangeError(
+                device,
+                asked,
+                f"limits are |speed| <= {self.speed} m/s, |turn rate| <= "
+                f"{self.turn_rate:.2f} rad/s, 0..{self.max_duration:g} s",
+                "use smaller values",
+            )
+
+
+# A Pioneer-class base driven gently indoors: the sim's controller and the ARCOS firmware's
+# settings (SETV, SETA, SETRV, SETRA) by default.
+PIONEER_LIMITS = BaseLimits()
+
 # The Canon VC-C4's mechanical limits and top speeds (specs/protocols.md, section A6).
 VCC4_LIMITS = PanTiltLimits(
     pan_min=math.radians(-100.0),

@@ -9,6 +9,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+from twin.core.devices import PIONEER_LIMITS, BaseLimits
 from twin.core.geometry import Pose2D, wrap_angle
 
 
@@ -54,16 +55,6 @@ class Odometry:
         return Pose2D(self.x, self.y, self.yaw)
 
 
-@dataclass(frozen=True)
-class DriveLimits:
-    """Speed and acceleration limits of the base (Pioneer-class defaults, gentle indoors)."""
-
-    speed: float = 0.5  # m/s
-    accel: float = 0.6  # m/s^2
-    turn_rate: float = math.radians(100.0)  # rad/s
-    turn_accel: float = math.radians(250.0)  # rad/s^2
-
-
 def _approach(error: float, vmax: float, decel: float, gain: float) -> float:
     """Speed toward zero error: capped, slowing so that it can stop in time, linear at the end."""
     mag = min(vmax, math.sqrt(2.0 * decel * abs(error)), gain * abs(error))
@@ -83,7 +74,7 @@ class GoToController:
     def __init__(
         self,
         goal: Pose2D,
-        limits: DriveLimits = DriveLimits(),
+        limits: BaseLimits = PIONEER_LIMITS,
         xy_tolerance: float = 0.01,
         yaw_tolerance: float = math.radians(0.7),
     ) -> None:

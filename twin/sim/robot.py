@@ -17,7 +17,9 @@ import mujoco
 import numpy as np
 
 from twin.core.devices import (
+    PIONEER_LIMITS,
     Base,
+    BaseLimits,
     Camera,
     DeviceFaultError,
     DeviceTimeoutError,
@@ -29,14 +31,13 @@ from twin.core.devices import (
 )
 from twin.core.errors import InputError
 from twin.core.geometry import CameraModel, Pose2D
-from twin.sim.drive import DiffDriveGeometry, DriveLimits, GoToController, Odometry
+from twin.sim.drive import DiffDriveGeometry, GoToController, Odometry
 from twin.sim.render import FrameRenderer
 from twin.sim.world import DEFAULT_SCENE, World
 
 CAMERA_NAME = "head_camera"
 ROBOT_CLEARANCE = 0.3  # m: the base's half-diagonal; a pose this far from furniture is free
 PAPER_CAMERA = CameraModel()  # 320x240, 45 degrees horizontal: the paper's camera
-GENTLE = DriveLimits()
 HEAD_TOLERANCE = math.radians(0.2)  # a pan-tilt move is over when the joint is this close
 # Driving needs under 1 N m per wheel; pushing against furniture takes the friction limit (~5).
 STALL_TORQUE = 3.0  # N m
@@ -65,7 +66,7 @@ class SimRobot:
     """
 
     def __init__(
-        self, world: World, start: Pose2D | None = None, limits: DriveLimits = GENTLE
+        self, world: World, start: Pose2D | None = None, limits: BaseLimits = PIONEER_LIMITS
     ) -> None:
         self.world = world
         m = world.model
@@ -452,19 +453,8 @@ class SimBase(_SimDevice, Base):
         return self.robot.go_to(goal, timeout)
 
     def drive(self, speed: float, turn_rate: float, duration: float) -> Pose2D:
-        asked = f"drive {speed} m/s, {turn_rate} rad/s for {duration} s"
-        self.require_connected(asked)
-        lim = self.robot.drive_limits
-        if not (
-            abs(speed) <= lim.speed and abs(turn_rate) <= lim.turn_rate and 0.0 <= duration <= 600.0
-        ):
-            raise OutOfRangeError(
-                self.name,
-                asked,
-                f"limits are |speed| <= {lim.speed} m/s, "
-                f"|turn rate| <= {lim.turn_rate:.2f} rad/s, 0..600 s",
-                "use smaller values",
-            )
+        self.require_connected(f"drive {speed} m/s, {turn_rate} rad/s for {duration} s")
+        self.robot.drive_limits.check_drive(self.name, speed, turn_rate, duration)
         return self.robot.drive(speed, turn_rate, duration)
 
     def stop(self) -> None:
