@@ -355,6 +355,8 @@ def test_ctrl_c_while_serving_the_results_stops_the_server_and_exits_130(tmp_pat
         ).stdout.splitlines()
         if "serve-grpc" in line
     } - {os.getpgid(0)}
+    from test_record import group_alive
+
     os.killpg(process.pid, signal.SIGINT)  # what a terminal's Ctrl-C sends to the job
     _, err = process.communicate(timeout=60)
     assert process.returncode == 130, err
@@ -364,14 +366,6 @@ def test_ctrl_c_while_serving_the_results_stops_the_server_and_exits_130(tmp_pat
     while any(group_alive(g) for g in server_groups):
         assert time.monotonic() < deadline, "the Rerun server outlived the survey"
         time.sleep(0.1)
-
-
-def group_alive(pgid: int) -> bool:
-    try:
-        os.killpg(pgid, 0)
-    except ProcessLookupError:
-        return False
-    return True
 
 
 def test_an_interrupted_survey_writes_its_results_and_resumes(

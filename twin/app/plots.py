@@ -154,15 +154,11 @@ def draw_figure3(
             if j == 0:
                 ax.set_yticks(range(len(ys)), [f"{y:g}" for y in ys], fontsize=8)
                 ax.set_ylabel("P_fn (false-negative rate)", fontsize=9)
-    width, height = fig.get_size_inches()
-    bar = fig.add_axes((right + 0.3 / width, bottom + 0.2 * (top - bottom), 0.18 / width,
-                        0.6 * (top - bottom)))  # fmt: skip
-    fig.colorbar(image, cax=bar, label="localization success (%)")
-    fig.suptitle(
+    _bar_and_title(
+        fig, image, (right, bottom, top), 0.6, 0.25,
         "Localization success (%): the grid's maximum is the object's cell or a neighbour "
         f"({_trials_note(rows)})",
-        y=1.0 - 0.25 / height,
-    )
+    )  # fmt: skip
     return fig
 
 
@@ -258,16 +254,26 @@ def draw_figure3_3d(
             ax.set_title(f"{rule}, {count} views", fontsize=9)
     _, right, bottom, top = _panel_grid(fig, n_rows, n_cols, (3.4, 3.0), (0.1, 1.1, 0.1, 0.6),
                                         (0.1, 0.4))  # fmt: skip
-    width, height = fig.get_size_inches()
-    bar = fig.add_axes((right + 0.3 / width, bottom + 0.25 * (top - bottom), 0.18 / width,
-                        0.5 * (top - bottom)))  # fmt: skip
-    fig.colorbar(surface, cax=bar, label="localization success (%)")
-    fig.suptitle(
+    _bar_and_title(
+        fig, surface, (right, bottom, top), 0.5, 0.2,
         "Localization success (%) over false-positive and false-negative rates "
         f"({_trials_note(rows)}); figure3.png gives the numbers",
-        y=1.0 - 0.2 / height,
-    )
+    )  # fmt: skip
     return fig
+
+
+def _bar_and_title(fig, mappable, panels, share: float, title_gap: float, title: str) -> None:
+    """A success colour bar right of the panels (``share`` of their height, centred) and the
+    title ``title_gap`` inches below the top edge; ``panels`` is (right, bottom, top) in figure
+    fractions."""
+    right, bottom, top = panels
+    width, height = fig.get_size_inches()
+    span = top - bottom
+    bar = fig.add_axes(
+        (right + 0.3 / width, bottom + 0.5 * (1 - share) * span, 0.18 / width, share * span)
+    )
+    fig.colorbar(mappable, cax=bar, label="localization success (%)")
+    fig.suptitle(title, y=1.0 - title_gap / height)
 
 
 def figure3_3d(
