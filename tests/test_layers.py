@@ -1,6 +1,6 @@
 """The layers, read from the source: which package may import which (ARCHITECTURE.md).
 
-    core  <-  rfch, sim, hardware  <-  serial_twins  <-  app  <-  commands, cli
+    core  <-  rfch, nav, sim, hardware  <-  serial_twins  <-  app  <-  commands, cli
 
 Every import statement counts, also those inside functions (the project imports heavy modules
 lazily), so a lazy import cannot smuggle a forbidden edge past the test.
@@ -83,6 +83,7 @@ RULES = {
     # layer: (project layers it may import, libraries it must not)
     "twin.core": (set(), DEVICE_LIBRARIES),
     "twin.rfch": ({"twin.core"}, DEVICE_LIBRARIES - {"cv2"}),
+    "twin.nav": ({"twin.core"}, DEVICE_LIBRARIES),
     "hardware.codec": (set(), DEVICE_LIBRARIES),
     "hardware": ({"twin.core", "hardware.codec"}, {"mujoco", "rerun", "ray"}),
     "twin.sim": ({"twin.core", "twin.resources"}, {"rerun", "serial", "ray"}),
@@ -92,6 +93,7 @@ RULES = {
             "twin",
             "twin.core",
             "twin.rfch",
+            "twin.nav",
             "twin.sim",
             "twin.serial_twins",
             "twin.resources",

@@ -287,19 +287,74 @@ class Base(Device):
         """Stop the wheels."""
 
 
+@dataclass(frozen=True)
+class LaserMount:
+    """Where a planar laser sits on the base: position (m) in the base frame (x forward, y left,
+    z up from the floor) and the yaw (rad) of its zero beam relative to the base's heading."""
+
+    x: float = 0.0
+    y: float = 0.0
+    z: float = 0.30
+    yaw: float = 0.0
+
+
+@dataclass(frozen=True)
+class Scan:
+    """One planar laser scan, in the scanner's own frame.
+
+    ``angles`` (n,) are the beam bearings in radians, counter-clockwise from the scanner's zero
+    direction, increasing (an LMS200's 180 degrees: -pi/2 on the right .. +pi/2 on the left);
+    ``ranges`` (n,) are metres, NaN where the beam saw nothing within ``max_range`` or the reading
+    is invalid (a dazzled or dropped-out beam); ``timestamp`` is on the robot's clock (the one
+    ``Camera.now`` reads), taken when the scan was complete."""
+
+    angles: np.ndarray
+    ranges: np.ndarray
+    timestamp: float
+    max_range: float
+
+    def points(self) -> np.ndarray:
+        """(k, 2) returns of the beams that hit something, in metres in the scanner's frame."""
+        hit = np.isfinite(self.ranges)
+        r, a = self.ranges[hit], self.angles[hit]
+        return np.stack([r * np.cos(a), r * np.sin(a)], axis=1)
+
+
+class Laser(Device):
+    """A planar laser range finder on the base (the Peoplebot's SICK LMS200 at 0.30 m)."""
+
+    @property
+    @abstractmethod
+    def mount(self) -> LaserMount:
+        """Where the scanner sits on the base."""
+
+    @abstractmethod
+    def scan(self, timeout: float = 2.0) -> Scan:
+        """The newest complete scan that began after this call (never a stale buffered one);
+        ``DeviceTimeoutError`` if none arrives within ``timeout`` seconds."""
+
+
 @dataclass
 class Robot:
-    """The three devices of a survey robot; connecting it connects all three (closing those
-    already open if one fails), and ``capture`` takes one ``View``."""
+    """The devices of a survey robot: camera, pan-tilt head, base, and optionally a laser.
+    Connecting it connects them all (closing those already open if one fails), and
+    ``capture`` takes one ``View``."""
 
     camera: Camera
     pantilt: PanTilt
     base: Base
+    laser: Laser | None = None
+
+    @property
+    def devices(self) -> tuple[Device, ...]:
+        """In connection order: the base first (a head or laser may ride on its AUX ports)."""
+        extra = (self.laser,) if self.laser is not None else ()
+        return (self.base, self.pantilt, self.camera, *extra)
 
     def connect(self) -> None:
         opened: list[Device] = []
         try:
-            for device in (self.base, self.pantilt, self.camera):
+            for device in self.devices:
                 device.connect()
                 opened.append(device)
         except BaseException:
@@ -309,7 +364,7 @@ class Robot:
 
     def close(self) -> None:
         errors: list[BaseException] = []
-        for device in (self.camera, self.pantilt, self.base):
+        for device in reversed(self.devices):
             try:
                 device.close()
             except Exception as exc:  # close every device even if one fails
