@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from twin.app.config import MissionConfig, load_config
-from twin.app.mission import Checkpoint, Mission, MissionState
+from twin.app.mission import Checkpoint, Mission, MissionState, PoseGate
 from twin.app.survey import plan_views, run_survey
 from twin.cli import main
 from twin.core.devices import VCC4_LIMITS, Base, Camera, Frame, PanTilt, Robot
@@ -272,7 +272,7 @@ def test_resume_after_an_interruption_gives_the_same_grid_and_continues_the_cloc
 
 
 def test_a_mission_refuses_a_state_that_is_not_its_grids(tmp_path):
-    with pytest.raises(TwinError, match="state says 3 views but its grid holds 0"):
+    with pytest.raises(TwinError, match=r"state says 3 views \(0 refused\) but its grid holds 0"):
         exact_mission(None, state=MissionState(views_done=3))
     plan = plan_views(MISSION, VCC4_LIMITS)
     mission = exact_mission(None)
@@ -280,6 +280,58 @@ def test_a_mission_refuses_a_state_that_is_not_its_grids(tmp_path):
         run_survey(mission, plan)
     with pytest.raises(TwinError, match="holds 18 views but its plan has 6"):
         run_survey(mission, plan[:6])
+
+
+class UnsureBase(ExactBase):
+    """An exact base that says it is unsure of its pose at the second stop (x = 3.0)."""
+
+    def pose_covariance(self):
+        sigma = 0.2 if self._pose.x == 3.0 else 0.01
+        return np.diag([sigma**2, sigma**2, math.radians(0.5) ** 2])
+
+
+def unsure_mission(out, grid=None, state=None, said=None):
+    base, head = UnsureBase(), ExactHead()
+    robot = Robot(Clocked(base, head, 0.0), head, base)
+    offset = Pose2D(0.1, 0.0, math.radians(1.0))  # the truth lies 0.1 m and 1 degree away
+
+    def truth():
+        p = base.pose()
+        return Pose2D(p.x + offset.x, p.y, p.yaw + offset.yaw)
+
+    return Mission(
+        robot, MeanDetector(), grid or AccumulatorGrid(["thing"], SPEC),
+        checkpoint=Checkpoint(out), state=state, truth_pose=truth,
+        pose_gate=PoseGate(max_sigma_m=0.05), say=said.append if said is not None else print,
+    )  # fmt: skip
+
+
+def test_a_view_whose_pose_is_too_uncertain_is_reported_and_not_fused(tmp_path):
+    plan = plan_views(MISSION, VCC4_LIMITS)
+    at_second_stop = [v.index for v in plan if v.stop == 1]
+    said = []
+    mission = unsure_mission(tmp_path, said=said)
+
+    def stop_after_second_stop(view):
+        if view.index == at_second_stop[-1] + 2:
+            raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt), mission.robot:
+        run_survey(mission, plan, stop_after_second_stop)
+    assert [r["view"] for r in mission.state.refused] == at_second_stop
+    assert all("pose uncertain: 20.0 cm (1 sigma)" in r["reason"] for r in mission.state.refused)
+    assert len(said) == len(at_second_stop) and said[0].startswith(f"view {at_second_stop[0] + 1}")
+    # a resumed mission counts fused and refused views alike and takes no view twice
+    grid, state = Checkpoint(tmp_path).load(AccumulatorGrid(["thing"], SPEC))
+    assert grid.views("thing") == state.views_done - len(at_second_stop)
+    resumed = unsure_mission(tmp_path, grid, state)
+    with resumed.robot:
+        run_survey(resumed, plan)
+    assert resumed.views_done == len(plan)
+    assert resumed.grid.views("thing") == len(plan) - len(at_second_stop)
+    result = resumed.result()
+    assert [r["view"] for r in result["views_refused"]] == at_second_stop
+    assert result["pose_error"] == {"max_m": 0.1, "mean_m": 0.1, "max_deg": 1.0}
 
 
 # -- the mission in the twin ------------------------------------------------------------------

@@ -77,9 +77,11 @@ class MissionState:
     """What a mission has done besides the grid: saved beside it after every view."""
 
     views_done: int = 0
-    path: list[list[float]] = field(default_factory=list)  # [x, y, yaw] per view
+    path: list[list[float]] = field(default_factory=list)  # [x, y, yaw] each view was taken from
     timings: dict[str, float] = field(default_factory=lambda: dict.fromkeys(TIMING_KEYS, 0.0))
     robot_time: float = 0.0  # seconds on the robot's clock at the last view, across resumes
+    truth_path: list[list[float]] = field(default_factory=list)  # simulation: where it really was
+    refused: list[dict[str, Any]] = field(default_factory=list)  # {"view", "reason"}: not fused
 
     def to_json(self) -> str:
         return json.dumps(
@@ -88,6 +90,8 @@ class MissionState:
                 "path": self.path,
                 "timings_s": self.timings,
                 "robot_time_s": self.robot_time,
+                "truth_path": self.truth_path,
+                "refused": self.refused,
             },
             indent=1,
         )
@@ -102,9 +106,51 @@ class MissionState:
             data = json.loads(path.read_text(encoding="utf-8"))
             timings = {k: float(data["timings_s"].get(k, 0.0)) for k in TIMING_KEYS}
             robot_time = float(data.get("robot_time_s", 0.0))
-            return cls(int(data["views_done"]), list(data["path"]), timings, robot_time)
+            refused = [
+                {"view": int(r["view"]), "reason": str(r["reason"])}
+                for r in data.get("refused", [])
+            ]
+            return cls(
+                int(data["views_done"]),
+                list(data["path"]),
+                timings,
+                robot_time,
+                list(data.get("truth_path", [])),
+                refused,
+            )
         except (ValueError, KeyError, TypeError, AttributeError):
             return cls()
+
+
+@dataclass(frozen=True)
+class PoseGate:
+    """The largest pose uncertainty (one standard deviation) a view may be fused with. A wedge
+    drawn from a pose this unsure blurs, offsets or duplicates the maxima (the paper's §4), so
+    such a view is refused instead, and the refusal is reported."""
+
+    max_sigma_m: float = 0.05  # along the worst direction of the position's covariance
+    max_sigma_yaw: float = math.radians(2.0)
+
+    def reason(self, covariance: np.ndarray | None) -> str | None:
+        """Why a view with this pose covariance may not be fused, or ``None`` if it may."""
+        if covariance is None:
+            return None
+        cov = np.asarray(covariance, dtype=float)
+        if cov.shape != (3, 3) or not np.all(np.isfinite(cov)):
+            return "the pose's covariance is not a finite 3 x 3 matrix"
+        sigma_xy = math.sqrt(max(0.0, float(np.linalg.eigvalsh(cov[:2, :2]).max())))
+        sigma_yaw = math.sqrt(max(0.0, float(cov[2, 2])))
+        if sigma_xy > self.max_sigma_m:
+            return (
+                f"pose uncertain: {100 * sigma_xy:.1f} cm (1 sigma), more than the "
+                f"{100 * self.max_sigma_m:g} cm allowed"
+            )
+        if sigma_yaw > self.max_sigma_yaw:
+            return (
+                f"pose uncertain: {math.degrees(sigma_yaw):.1f} deg (1 sigma), more than the "
+                f"{math.degrees(self.max_sigma_yaw):g} deg allowed"
+            )
+        return None
 
 
 class Checkpoint:
@@ -126,9 +172,12 @@ class Checkpoint:
                 "differ); start a new run"
             )
         state = MissionState.read(self.state_path)
-        done = saved.views(saved.objects[0])
+        # The grid counts the fused views, the state the refused ones; the grid is saved first,
+        # so a state one view behind it missed that (fused) view's notes only.
+        done = saved.views(saved.objects[0]) + len(state.refused)
         state.views_done = done
         del state.path[done:]
+        del state.truth_path[done:]
         return saved, state
 
     def save(self, grid: AccumulatorGrid, state: MissionState) -> None:
@@ -158,6 +207,8 @@ class Mission:
         camera_height: float = 1.0,
         truth: dict[str, tuple[float, float, float]] | None = None,
         truth_pose: Callable[[], Pose2D] | None = None,
+        pose_gate: PoseGate | None = None,
+        say: Callable[[str], None] = lambda _: None,
     ) -> None:
         names = list(detector.names)
         if sorted(names) != sorted(grid.objects):
@@ -166,14 +217,17 @@ class Mission:
         self.recorder = recorder or NullRecorder()
         self.checkpoint = checkpoint
         self.state = state or MissionState()
-        if self.state.views_done != grid.views(grid.objects[0]):
+        fused = grid.views(grid.objects[0])
+        if self.state.views_done != fused + len(self.state.refused):
             raise TwinError(
-                f"the mission's state says {self.state.views_done} views but its grid holds "
-                f"{grid.views(grid.objects[0])}; resume from the run's own checkpoint"
+                f"the mission's state says {self.state.views_done} views "
+                f"({len(self.state.refused)} refused) but its grid holds {fused}; resume from "
+                "the run's own checkpoint"
             )
         self.max_range, self.camera_height = max_range, camera_height
         self.truth = dict(truth or {})
         self.truth_pose = truth_pose
+        self.pose_gate, self.say = pose_gate, say
         self._names = names
         # Robot time continues across resumes: this session's clock starts where the last
         # session's last view left it.
@@ -192,7 +246,8 @@ class Mission:
             self.state.timings[key] += time.perf_counter() - tick
 
     def observe(self, target: ViewTarget) -> ViewRecord:
-        """Take one view from ``target`` and fuse it; returns what the view was."""
+        """Take one view from ``target`` and fuse it (unless its pose is too uncertain for the
+        ``pose_gate``: then it is recorded, reported and not fused); returns what it was."""
         started = time.perf_counter()
         robot, state = self.robot, self.state
         with self._timed("move"):
@@ -207,12 +262,19 @@ class Mission:
             camera = robot.camera.model
             spans = self.detector.column_spans(view.image.shape[1])
             wedges = camera.wedges(view.pose, view.pan, spans)
-        with self._timed("fuse"):
-            per_object = {name: values[i] for i, name in enumerate(self._names)}
-            self.grid.fuse_all((view.pose.x, view.pose.y), wedges, per_object, self.max_range)
         index = state.views_done
+        per_object = {name: values[i] for i, name in enumerate(self._names)}
+        refusal = self.pose_gate.reason(view.pose_covariance) if self.pose_gate else None
+        if refusal is None:
+            with self._timed("fuse"):
+                self.grid.fuse_all((view.pose.x, view.pose.y), wedges, per_object, self.max_range)
+        else:
+            state.refused.append({"view": index, "reason": refusal})
+            self.say(f"view {index + 1} not fused: {refusal}")
         state.views_done += 1
         state.path.append([view.pose.x, view.pose.y, view.pose.yaw])
+        if truth_pose is not None:
+            state.truth_path.append([truth_pose.x, truth_pose.y, truth_pose.yaw])
         state.robot_time = view.timestamp - self._clock_origin
         record = ViewRecord(
             index,
@@ -227,6 +289,7 @@ class Mission:
             per_object,
             tuple((x, y, yaw) for x, y, yaw in state.path),
             truth_pose,
+            refusal,
         )
         with self._timed("record"):
             self.recorder.log_view(record, self.grid)
@@ -241,12 +304,38 @@ class Mission:
         """Per object the estimate (and, in the sim, the truth and the error), the views fused,
         the robot time and where the time went (seconds)."""
         truth = {name: xyz[:2] for name, xyz in self.truth.items()}
-        return {
+        result: dict[str, Any] = {
             "objects": estimates(self.grid, truth, peak_separation),
             "views": self.state.views_done,
+            "views_refused": list(self.state.refused),
             "robot_time_s": round(self.state.robot_time, 3),
             "timings_s": {k: round(v, 3) for k, v in self.state.timings.items()},
         }
+        error = pose_error(self.state)
+        if error is not None:
+            result["pose_error"] = error
+        return result
+
+
+def pose_error(state: MissionState) -> dict[str, float] | None:
+    """How far the poses the fused views were projected from lay from the truth (simulation
+    only): max and mean position error (m), max heading error (degrees); ``None`` without truth."""
+    refused = {r["view"] for r in state.refused}
+    pairs = [
+        (used, true)
+        for i, (used, true) in enumerate(zip(state.path, state.truth_path, strict=False))
+        if i not in refused
+    ]
+    if not pairs or len(state.truth_path) < len(state.path):
+        return None
+    used, true = np.array([p[0] for p in pairs]), np.array([p[1] for p in pairs])
+    distance = np.hypot(*(used[:, :2] - true[:, :2]).T)
+    heading = np.abs((used[:, 2] - true[:, 2] + math.pi) % (2 * math.pi) - math.pi)
+    return {
+        "max_m": round(float(distance.max()), 4),
+        "mean_m": round(float(distance.mean()), 4),
+        "max_deg": round(math.degrees(float(heading.max())), 3),
+    }
 
 
 def estimates(

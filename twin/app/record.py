@@ -87,6 +87,7 @@ class ViewRecord:
     # the recorder draws the views it has seen itself
     path: tuple[tuple[float, float, float], ...] = ()
     truth_pose: Pose2D | None = None  # simulation only: where the base really stood
+    refusal: str | None = None  # why the view was not fused (its pose too uncertain), if so
 
 
 class Recorder(Protocol):

@@ -88,6 +88,9 @@ class View:
     pan: float
     tilt: float
     timestamp: float
+    # 3 x 3 covariance of (x, y, yaw) in m^2 and rad^2 when the base knows it (a localizer),
+    # None when it does not (bare odometry, whose error only grows)
+    pose_covariance: np.ndarray | None = None
 
 
 @dataclass(frozen=True)
@@ -267,6 +270,11 @@ class Base(Device):
     def pose(self) -> Pose2D:
         """The base's own estimate of its pose (map frame): what a view is projected from."""
 
+    def pose_covariance(self) -> np.ndarray | None:
+        """The 3 x 3 covariance of ``pose()``'s (x, y, yaw), m^2 and rad^2, when the base knows
+        how sure it is (a laser localizer does); ``None`` for bare odometry."""
+        return None
+
     @abstractmethod
     def set_pose(self, pose: Pose2D) -> None:
         """Declare the current pose in the map frame (re-anchors the odometry; moves nothing)."""
@@ -390,4 +398,5 @@ class Robot:
         pan, tilt = self.pantilt.position()
         pose = self.base.pose()
         require_finite("view pose", pose.x, pose.y, pose.yaw, pan, tilt)
-        return View(frame.image, pose, pan, tilt, frame.timestamp)
+        covariance = self.base.pose_covariance()
+        return View(frame.image, pose, pan, tilt, frame.timestamp, covariance)
