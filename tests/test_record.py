@@ -31,6 +31,7 @@ import pytest
 pytest.importorskip("rerun")
 
 from twin.app.record import (
+    Localization,
     RerunRecorder,
     SceneInfo,
     ViewRecord,
@@ -548,3 +549,39 @@ def test_sigterm_leaves_no_server_behind(tmp_path) -> None:
     finally:
         child.kill()
     assert wait_gone(pgid), "the Rerun server outlived the survey"
+
+
+def test_localization_draws_the_map_the_scan_at_the_pose_and_the_particles(tmp_path) -> None:
+    """A laser localizer's view: the map's occupied cells, the scan's returns where they hit
+    (laser mounted ahead of the base's centre), the particles, and the true path."""
+    from dataclasses import replace
+
+    from twin.core.devices import LaserMount, Scan
+    from twin.nav.maps import OccupancyMap
+
+    occupancy = np.zeros((120, 90))
+    occupancy[100:102, 20:30] = 1.0  # a wall segment 1.0..1.5 m in x at y = 5.0..5.1 m
+    scene = replace(make_scene(), occupancy=OccupancyMap(occupancy, 0.05))
+    grid = make_grid()
+    mount = LaserMount(x=0.2, y=0.0, z=0.3, yaw=0.0)
+    # two beams: straight ahead 1 m, and 90 degrees left 0.5 m; a third saw nothing
+    scan = Scan(np.array([0.0, math.pi / 2, -math.pi / 2]), np.array([1.0, 0.5, np.nan]), 0.0, 8.0)
+    particles = np.array([[1.1, 1.2, 0.0], [1.12, 1.18, 0.01], [1.09, 1.21, -0.01]])
+    path = tmp_path / "localized.rrd"
+    recorder = RerunRecorder("save", path)
+    recorder.begin(scene, grid, 1)
+    record, _ = next(synthetic_views(grid, 1))  # at (1.1, 1.2) facing +x
+    record = replace(
+        record,
+        localization=Localization(scan, mount, particles),
+        truth_path=((1.12, 1.2, 0.0),),
+    )
+    recorder.log_view(record, grid)
+    recorder.end()
+    rec = read_recording(path)
+    (hits,) = seen_2d(rec, "/top/map/scan", 0, "Points2D:positions")
+    np.testing.assert_allclose(hits, [[1.1 + 0.2 + 1.0, 1.2], [1.1 + 0.2, 1.2 + 0.5]], atol=1e-6)
+    (dots,) = seen_2d(rec, "/top/map/particles", 0, "Points2D:positions")
+    np.testing.assert_allclose(dots, particles[:, :2], atol=1e-6)
+    (cells,) = seen_2d(rec, "/top/map/occupancy", 0, "Boxes2D:centers")
+    assert len(cells) == 20 and np.allclose(cells.mean(axis=0), (1.25, 5.05), atol=1e-6)

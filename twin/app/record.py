@@ -36,11 +36,12 @@ from typing import Any, Protocol
 import numpy as np
 
 from twin.app.rerun_server import VIEWER_MEMORY_LIMIT, RerunServer, has_display
-from twin.core.devices import View
+from twin.core.devices import LaserMount, Scan, View
 from twin.core.errors import TwinError
 from twin.core.fusion import FusionRule
 from twin.core.geometry import CameraModel, Footprint, Pose2D
 from twin.core.grid import AccumulatorGrid
+from twin.nav.maps import OccupancyMap
 
 JPEG_QUALITY = 85
 VIEWER_FLUSH_TIMEOUT = 10.0  # seconds a viewer may take to accept a view before it is left behind
@@ -67,6 +68,7 @@ class SceneInfo:
     furniture: tuple[Footprint, ...] = ()
     truth: dict[str, tuple[float, float, float]] = field(default_factory=dict)
     peak_separation: float = 0.0
+    occupancy: OccupancyMap | None = None  # the map the robot localizes against, if any
 
 
 @dataclass(frozen=True)
@@ -88,6 +90,29 @@ class ViewRecord:
     path: tuple[tuple[float, float, float], ...] = ()
     truth_pose: Pose2D | None = None  # simulation only: where the base really stood
     refusal: str | None = None  # why the view was not fused (its pose too uncertain), if so
+    localization: Localization | None = None  # the laser and the particles, with a localizer
+    truth_path: tuple[tuple[float, float, float], ...] = ()  # simulation: the true poses so far
+
+
+@dataclass(frozen=True)
+class Localization:
+    """What a laser localizer saw at a view: its latest scan, where the scanner sits on the
+    base, and the particles (n, 3: x, y, yaw in the map frame) its estimate came from."""
+
+    scan: Scan | None
+    mount: LaserMount
+    particles: np.ndarray | None = None
+
+    def scan_points(self, pose: Pose2D) -> np.ndarray:
+        """(k, 2) map-frame points the scan's returns hit, seen from the base at ``pose``."""
+        if self.scan is None:
+            return np.zeros((0, 2))
+        local = self.scan.points()
+        c, s = math.cos(self.mount.yaw), math.sin(self.mount.yaw)
+        x = self.mount.x + c * local[:, 0] - s * local[:, 1]
+        y = self.mount.y + s * local[:, 0] + c * local[:, 1]
+        c, s = math.cos(pose.yaw), math.sin(pose.yaw)
+        return np.stack([pose.x + c * x - s * y, pose.y + s * x + c * y], axis=1)
 
 
 class Recorder(Protocol):
@@ -381,6 +406,8 @@ class RerunRecorder:
         log("world", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
         log(MAP, rr.Transform3D(scale=[1.0, -1.0, 1.0]), static=True)  # north up in 2-D
         self._log_room(scene)
+        if scene.occupancy is not None:
+            self._log_occupancy(scene.occupancy)
         log(
             "world/robot/body",
             rr.Boxes3D(centers=[[0, 0, 0.6]], half_sizes=[[0.25, 0.2, 0.6]], colors=[90, 90, 200]),
@@ -458,6 +485,18 @@ class RerunRecorder:
                     draw_order=29.0,
                 ),
             )
+        if record.truth_path:
+            log(
+                f"{MAP}/truth_path",
+                rr.LineStrips2D(
+                    [[(p[0], p[1]) for p in record.truth_path]],
+                    colors=[255, 160, 60],
+                    radii=0.015,
+                    draw_order=19.0,
+                ),
+            )
+        if record.localization is not None:
+            self._log_localization(record.localization, pose)
         self._log_camera(record)
         for name, values in record.column_values.items():
             self._log_wedges(name, (pose.x, pose.y), record.wedges, values)
@@ -626,6 +665,58 @@ class RerunRecorder:
             ),
             static=True,
         )
+
+    def _log_occupancy(self, occupancy: OccupancyMap) -> None:
+        """The map's occupied cells: dark squares in the top-down panel, and a slice at the
+        laser's height in the 3-D room (what the robot localizes against)."""
+        rr, log = self._rr, self.stream.log
+        rows, cols = np.nonzero(occupancy.occupied)
+        xs, ys = occupancy.center_of(rows, cols)
+        half = 0.5 * occupancy.resolution
+        log(
+            f"{MAP}/occupancy",
+            rr.Boxes2D(
+                centers=np.stack([xs, ys], axis=1),
+                half_sizes=[[half, half]],
+                colors=[60, 60, 60, 170],
+                draw_order=12.0,
+            ),
+            static=True,
+        )
+        log(
+            "world/room/occupancy",
+            rr.Points3D(
+                np.stack([xs, ys, np.full_like(xs, 0.3)], axis=1), radii=half, colors=[60, 60, 60]
+            ),
+            static=True,
+        )
+
+    def _log_localization(self, localization: Localization, pose: Pose2D) -> None:
+        """This view's laser returns (at the pose the view was taken from) and particles."""
+        rr, log = self._rr, self.stream.log
+        hits = localization.scan_points(pose)
+        log(
+            f"{MAP}/scan",
+            rr.Points2D(hits, radii=0.02, colors=[230, 60, 60], draw_order=25.0),
+        )
+        log(
+            "world/scan",
+            rr.Points3D(
+                np.column_stack([hits, np.full(len(hits), localization.mount.z)]),
+                radii=0.015,
+                colors=[230, 60, 60],
+            ),
+        )
+        if localization.particles is not None:
+            log(
+                f"{MAP}/particles",
+                rr.Points2D(
+                    np.asarray(localization.particles)[:, :2],
+                    radii=0.01,
+                    colors=[40, 200, 200],
+                    draw_order=24.0,
+                ),
+            )
 
     def _log_truth(self, name: str, position: tuple[float, float, float]) -> None:
         rr, log = self._rr, self.stream.log
