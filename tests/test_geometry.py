@@ -44,3 +44,20 @@ def test_bad_camera_and_pose_input():
 def test_wrap_angle():
     assert wrap_angle(3 * math.pi / 2) == pytest.approx(-math.pi / 2)
     np.testing.assert_allclose(wrap_angle(np.array([0.0, 2 * math.pi + 0.1])), [0.0, 0.1])
+
+
+def test_compose_and_relative_are_inverse_rigid_transforms():
+    import math
+
+    from twin.core.geometry import Pose2D
+
+    a = Pose2D(1.0, 2.0, math.radians(90.0))
+    local = Pose2D(0.5, 0.0, math.radians(10.0))
+    b = a.compose(local)
+    assert (round(b.x, 9), round(b.y, 9), round(math.degrees(b.yaw), 9)) == (1.0, 2.5, 100.0)
+    back = a.relative(b)
+    assert (round(back.x, 9), round(back.y, 9), round(back.yaw, 9)) == (
+        0.5,
+        0.0,
+        round(local.yaw, 9),
+    )

@@ -45,6 +45,22 @@ class Pose2D:
         """Signed smallest angle (radians) that turns this yaw into ``other.yaw``."""
         return float(wrap_angle(other.yaw - self.yaw))
 
+    def compose(self, local: Pose2D) -> Pose2D:
+        """``local`` (a pose in this pose's frame) expressed in this pose's parent frame."""
+        c, s = math.cos(self.yaw), math.sin(self.yaw)
+        return Pose2D(
+            self.x + c * local.x - s * local.y,
+            self.y + s * local.x + c * local.y,
+            float(wrap_angle(self.yaw + local.yaw)),
+        )
+
+    def relative(self, other: Pose2D) -> Pose2D:
+        """``other`` (in the same frame as this pose) seen from this pose: the inverse of
+        ``compose``, so ``a.compose(a.relative(b)) == b``."""
+        c, s = math.cos(self.yaw), math.sin(self.yaw)
+        dx, dy = other.x - self.x, other.y - self.y
+        return Pose2D(c * dx + s * dy, -s * dx + c * dy, float(wrap_angle(other.yaw - self.yaw)))
+
 
 @dataclass(frozen=True)
 class CameraModel:
