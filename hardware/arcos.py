@@ -65,21 +65,6 @@ AUX_PORTS = {1: (Command.TTY2, Command.GETAUX, 0xB0), 2: (66, 67, 0xB8), 3: (60,
 T = TypeVar("T")
 
 
-def _compose(a: Pose2D, b: Pose2D) -> Pose2D:
-    """``b`` expressed in ``a``'s frame, taken to ``a``'s parent frame."""
-    c, s = math.cos(a.yaw), math.sin(a.yaw)
-    return Pose2D(
-        a.x + c * b.x - s * b.y, a.y + s * b.x + c * b.y, float(wrap_angle(a.yaw + b.yaw))
-    )
-
-
-def _relative(a: Pose2D, b: Pose2D) -> Pose2D:
-    """``b`` seen from ``a`` (both in the same frame)."""
-    c, s = math.cos(a.yaw), math.sin(a.yaw)
-    dx, dy = b.x - a.x, b.y - a.y
-    return Pose2D(c * dx + s * dy, -s * dx + c * dy, float(wrap_angle(b.yaw - a.yaw)))
-
-
 def _fmt(pose: Pose2D) -> str:
     return f"({pose.x:.3f}, {pose.y:.3f}) m, {math.degrees(pose.yaw):.1f} deg"
 
@@ -494,7 +479,7 @@ class ArcosBase(Base):
     def _map_pose_now(self) -> Pose2D:
         assert self._anchor is not None and self._odometry is not None
         map_anchor, odom_anchor = self._anchor
-        return _compose(map_anchor, _relative(odom_anchor, self._odometry.pose))
+        return map_anchor.compose(odom_anchor.relative(self._odometry.pose))
 
     def _odometry_heading(self, map_yaw: float) -> float:
         """A map-frame yaw as a heading in the robot's odometry frame (rad)."""
