@@ -46,6 +46,10 @@ class TelegramError(LmsCodecError):
     the bytes it names, so parsing continues with what follows."""
 
 
+class CrcError(TelegramError):
+    """A complete telegram whose CRC is wrong: the one case a scanner answers with NAK."""
+
+
 class ReplyError(LmsCodecError):
     """A well-framed telegram whose content is not what its code promises."""
 
@@ -298,7 +302,7 @@ class TelegramParser:
             sent, computed = raw[-2] | raw[-1] << 8, crc16(raw[:-2])
             if sent != computed:
                 del buf[: total if self.discard_bad else 1]
-                raise TelegramError(
+                raise CrcError(
                     f"bad CRC {sent:04X} (computed {computed:04X}) on a {total}-byte telegram "
                     f"{describe(raw)}"
                 )
