@@ -12,16 +12,17 @@ HW_MODULES: tuple[str, ...] = (
     "twin.commands.hw_probe",
     "twin.commands.hw_vcc4",
     "twin.commands.hw_arcos",
+    "twin.commands.hw_lms",
 )
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     parser = subparsers.add_parser(
         "hw",
-        help="probe and drive the real devices (VC-C4 head, ARCOS base, cameras)",
+        help="probe and drive the real devices (VC-C4 head, ARCOS base, SICK laser, cameras)",
         description="Commands for users at the robot: probe serial ports and cameras, move the "
-        "VC-C4 head, drive the ARCOS base. They work the same against the serial twins "
-        "(twin serve-hardware).",
+        "VC-C4 head, drive the ARCOS base, read the SICK LMS200 laser. They work the same "
+        "against the serial twins (twin serve-hardware).",
     )
     hw = parser.add_subparsers(dest="hw_command", metavar="DEVICE", required=True)
     for module_name in HW_MODULES:

@@ -210,7 +210,7 @@ class LmsTiming:
 class LmsFaults:
     """Faults for tests, each applied to the next ``*_count`` telegrams."""
 
-    junk: bytes = b"\x00\xff\x02\x80\x05junk\x15"
+    junk: bytes = b"\x00\xff\x02\x80\x05junk\x06"  # a stray STX and an ACK-like byte
     junk_count: int = 0  # replies and scans preceded by ``junk``
     nak_count: int = 0  # good requests answered with NAK (and dropped)
     corrupt_scans: int = 0  # scans sent with a broken CRC

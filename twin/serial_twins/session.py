@@ -1,5 +1,6 @@
 """The serial twins of one robot: the sim world stepped in time with a clock, the emulated ARCOS
-base and VC-C4 head on their lines, started and stopped together.
+base and VC-C4 head on their lines, and optionally the emulated SICK LMS200 laser on its own,
+started and stopped together.
 
 ``twin serve-hardware`` runs one for users' own tools; the device factory starts one when a
 config gives a hardware device ``port = "twin"``, so the real drivers fly the mission against it.
@@ -14,6 +15,7 @@ from pathlib import Path
 from twin.core.clock import SYSTEM_CLOCK, Clock
 from twin.serial_twins.arcos import serve_arcos
 from twin.serial_twins.bytedevice import DeviceLine
+from twin.serial_twins.lms2xx import BaudMemoryLink, LMS2xxServer, RangeSource, serve_lms2xx
 from twin.serial_twins.memory import MemoryLink
 from twin.serial_twins.pty import PtyLink
 from twin.serial_twins.runner import WorldRunner
@@ -25,15 +27,19 @@ VCC4_WIRINGS = ("direct", "aux")
 
 class SerialTwins:
     """An ARCOS emulator, and a VC-C4 emulator on its own line (``direct``) or behind the base's
-    AUX1 port (``aux``), both driving ``sim``, whose world a ``WorldRunner`` steps.
+    AUX1 port (``aux``), both driving ``sim``, whose world a ``WorldRunner`` steps; with a
+    ``laser_source`` (``source(angles_rad) -> ranges_m``, see ``twin.serial_twins.lms2xx``) also
+    an LMS200 emulator on a line named ``lms2xx``, ``laser_options`` going to its emulator.
 
     The lines are pseudo-terminals (``lines="pty"``, stable symlinks in ``link_dir`` if given)
-    or ``MemoryLink``s (``lines="memory"``: drivers plug in with ``arcos_link.transport()``);
+    or ``MemoryLink``s (``lines="memory"``: drivers plug in with ``arcos_link.transport()``; the
+    laser's is a ``BaudMemoryLink``, which knows the rate the driver set);
     everything runs on ``clock``, which for pseudo-terminals must be the system clock."""
 
     def __init__(self, sim: SimRobot, time_scale: float = 1.0, vcc4_wiring: str = "direct",
                  link_dir: Path | None = None, *, clock: Clock = SYSTEM_CLOCK,
-                 lines: str = "pty") -> None:  # fmt: skip
+                 lines: str = "pty", laser_source: RangeSource | None = None,
+                 laser_options: dict[str, object] | None = None) -> None:  # fmt: skip
         if vcc4_wiring not in VCC4_WIRINGS:
             raise ValueError(f"vcc4_wiring must be one of {VCC4_WIRINGS}, got {vcc4_wiring!r}")
         if lines not in ("pty", "memory"):
@@ -43,7 +49,8 @@ class SerialTwins:
 
         def link(name: str) -> DeviceLine:
             if lines == "memory":
-                return MemoryLink(clock, f"{name} memory line")
+                kind = BaudMemoryLink if name == "lms2xx" else MemoryLink
+                return kind(clock, f"{name} memory line")
             if link_dir is None:
                 return PtyLink()
             link_dir.mkdir(parents=True, exist_ok=True)
@@ -56,6 +63,11 @@ class SerialTwins:
         else:
             self._vcc4 = serve_vcc4(sim, link("vcc4"), clock=clock)
         self._arcos = serve_arcos(sim, link("arcos"), aux1=aux1, clock=clock)
+        self._lms2xx: LMS2xxServer | None = None
+        if laser_source is not None:
+            self._lms2xx = serve_lms2xx(
+                laser_source, link("lms2xx"), clock=clock, **(laser_options or {})
+            )
         self._runner.start()
 
     @property
@@ -77,16 +89,31 @@ class SerialTwins:
         """The VC-C4's own line, or None when it hangs off the base's AUX1 port."""
         return self._vcc4.link if self._vcc4 is not None else None
 
+    @property
+    def lms2xx_path(self) -> str | None:
+        """The laser's line, or None when the twins run without one."""
+        return self._lms2xx.path if self._lms2xx is not None else None
+
+    @property
+    def lms2xx_link(self) -> DeviceLine | None:
+        """The laser's line (a ``BaudMemoryLink`` with ``lines="memory"``), or None."""
+        return self._lms2xx.link if self._lms2xx is not None else None
+
+    @property
+    def lms2xx(self) -> LMS2xxServer | None:
+        """The laser's server (its ``emulator`` for fault injection), or None."""
+        return self._lms2xx
+
     def hangup(self, device: str) -> None:
-        """Unplug and replug ``device`` ("arcos" or "vcc4"): its pseudo-terminal is replaced
-        (a stable link follows it), as a cable pulled mid-mission would (fault injection)."""
-        server = {"arcos": self._arcos, "vcc4": self._vcc4}.get(device)
+        """Unplug and replug ``device`` ("arcos", "vcc4" or "lms2xx"): its pseudo-terminal is
+        replaced (a stable link follows it), as a cable pulled mid-mission would."""
+        server = {"arcos": self._arcos, "vcc4": self._vcc4, "lms2xx": self._lms2xx}.get(device)
         if server is None:
             raise ValueError(f"no serial twin {device!r} on its own line here")
         server.hangup()
 
     def stop(self) -> None:
-        for server in (self._vcc4, self._arcos):
+        for server in (self._lms2xx, self._vcc4, self._arcos):
             if server is not None:
                 server.stop()
         self._runner.stop()
