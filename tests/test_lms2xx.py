@@ -350,3 +350,32 @@ def test_cli_status_and_scan_json(pty_server, capsys):
     assert "181 beams" in capsys.readouterr().out
     assert main(["hw", "lms", "--port", path + ".missing", "status"]) == 2
     assert "SICK LMS2xx: open " in capsys.readouterr().err
+
+
+def test_serve_hardware_offers_the_laser_and_probe_finds_it(tmp_path, capsys):
+    import subprocess
+    import sys
+
+    from twin.cli import main
+
+    links = tmp_path / "links"
+    argv = ["serve-hardware", "--laser", "--seconds", "60", "--link-dir", str(links)]
+    server = subprocess.Popen(
+        [sys.executable, "-m", "twin.cli", *argv], stdout=subprocess.PIPE, text=True
+    )
+    try:
+        printed = "".join(server.stdout.readline() for _ in range(4))
+        assert f"SICK LMS200: {links / 'lms2xx'} -> /dev/pts/" in printed and "serving" in printed
+        assert main(["hw", "probe", "--port", str(links / "lms2xx")]) == 0
+        assert (
+            f"{links / 'lms2xx'}: SICK LMS200;30106;V02.30 at 9600 baud (values on request 25"
+            in capsys.readouterr().out
+        )
+        assert main(["hw", "lms", "--port", str(links / "lms2xx"), "scan", "--json"]) == 0
+        ranges = np.array(json.loads(capsys.readouterr().out)["ranges_m"], dtype=float)
+        hits = ranges[np.isfinite(ranges)]
+        assert len(ranges) == 181 and len(hits) > 100  # the living room's walls and furniture
+        assert hits.min() > 0.1 and hits.max() <= 8.182
+    finally:
+        server.terminate()
+        server.wait(timeout=10)

@@ -1,8 +1,9 @@
 """``twin hw probe``: which serial ports and cameras there are, and what answers on each.
 
 Nothing moves: the ARCOS check is the SYNC handshake alone (the robot is not opened), the VC-C4
-check an operation-status query; a camera is opened for one frame. Every check has a short
-timeout, so a silent port costs about a second.
+check an operation-status query, the SICK LMS check a type and a status request at 9600 and at
+38400 baud (its stream and settings are left as they are); a camera is opened for one frame.
+Every check has a short timeout, so a silent port costs about two seconds.
 """
 
 from __future__ import annotations
@@ -16,9 +17,10 @@ def register(hw_subparsers: argparse._SubParsersAction) -> None:
         "probe",
         help="list serial ports and cameras, and what answers on them",
         description="Lists the serial ports and video devices and asks each what it is: an "
-        "ARCOS robot (SYNC handshake, nothing opened), a Canon VC-C4 (status query), a camera "
-        "(one frame). Add ports the system does not list (e.g. the serial twins' "
-        "pseudo-terminals) with --port.",
+        "ARCOS robot (SYNC handshake, nothing opened), a Canon VC-C4 (status query), a SICK "
+        "LMS200 laser (type and status requests at 9600 and 38400 baud), a camera (one "
+        "frame). Add ports the system does not list (e.g. the serial twins' pseudo-terminals) "
+        "with --port.",
     )
     parser.add_argument("--port", action="append", default=[], help="also probe this port")
     parser.add_argument("--camera", action="append", default=[], help="also probe this camera")
@@ -36,6 +38,7 @@ def serial_ports(extra: list[str]) -> list[str]:
 def probe_serial(port: str, timeout: float) -> str:
     """What answers on ``port``, in one line."""
     from hardware.arcos import ArcosBase
+    from hardware.lms2xx import LMS2xx
     from hardware.vcc4 import VCC4
     from twin.core.devices import DeviceError
 
@@ -49,7 +52,14 @@ def probe_serial(port: str, timeout: float) -> str:
     try:
         return VCC4.open(port, answer_timeout=timeout, retries=0).identify()
     except DeviceError:
-        return "no ARCOS robot and no VC-C4 answers (check power, cable, baud 9600)"
+        pass
+    try:
+        return LMS2xx.open(port).identify(rates=(9600, 38400), timeout=timeout)
+    except DeviceError:
+        return (
+            "no ARCOS robot and no VC-C4 answers, nor a SICK LMS at 9600 or 38400 baud "
+            "(check power, cable, baud)"
+        )
 
 
 def probe_camera(device: str) -> str:
