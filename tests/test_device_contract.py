@@ -5,7 +5,8 @@ capture backend (a video file: no camera is attached here), and the serial hardw
 talking to their emulators (the serial twins, on lines in memory, all on one ``ManualClock``:
 the drivers' timeouts and the world's pace are virtual seconds, so no result depends on the
 machine's speed; tests/test_vcc4_pty.py and test_arcos_driver.py keep the real-pty runs). A new
-device type joins by adding a factory. The clocks the drivers wait on have their contract too.
+device type joins by adding a factory (a laser's yields a ``LaserUnderTest``: the device with its
+clock and field of view). The clocks the drivers wait on have their contract too.
 """
 
 from __future__ import annotations
@@ -15,13 +16,22 @@ import math
 import threading
 import time
 from collections.abc import Callable, Iterator
+from dataclasses import dataclass
 
 import cv2
 import numpy as np
 import pytest
 
 from twin.core.clock import Clock, ClockStalledError, ManualClock, SystemClock
-from twin.core.devices import Base, Camera, NotConnectedError, OutOfRangeError, PanTilt
+from twin.core.devices import (
+    Base,
+    Camera,
+    Laser,
+    LaserMount,
+    NotConnectedError,
+    OutOfRangeError,
+    PanTilt,
+)
 from twin.core.geometry import Pose2D
 
 DeviceFactory = Callable[[object], contextlib.AbstractContextManager]
@@ -117,9 +127,35 @@ def arcos_base(tmp_path) -> Iterator[Base]:
         )
 
 
+@dataclass(frozen=True)
+class LaserUnderTest:
+    """A laser for the contract, not yet connected, with what the contract cannot ask it: the
+    clock its scans are timestamped on (``now``, seconds) and the field of view its beams span
+    (rad, centred on the zero beam)."""
+
+    device: Laser
+    now: Callable[[], float]
+    fov: float
+
+
+@contextlib.contextmanager
+def lms2xx_on_its_emulator(tmp_path) -> Iterator[LaserUnderTest]:
+    """The LMS2xx driver on the emulated LMS200 in the spec's 4 m square room, on a memory line
+    that knows the driver's baud rate, in virtual time."""
+    from hardware.lms2xx import LMS2xx
+    from twin.serial_twins.lms2xx import BaudMemoryLink, serve_lms2xx, square_room
+
+    clock = ManualClock()
+    link = BaudMemoryLink(clock, "lms2xx line")
+    with serve_lms2xx(square_room(), link, clock=clock):
+        laser = LMS2xx(lambda: link.transport("SICK LMS2xx"), clock=clock)
+        yield LaserUnderTest(laser, clock.now, math.pi)
+
+
 CAMERAS = {"sim": sim_camera, "opencv": opencv_camera}
 PANTILTS = {"sim": sim_pantilt, "vcc4": vcc4_on_its_line, "vcc4-aux": vcc4_on_the_aux_port}
 BASES = {"sim": sim_base, "arcos": arcos_base}
+LASERS = {"lms2xx": lms2xx_on_its_emulator}
 
 
 @pytest.fixture(params=sorted(CAMERAS))
@@ -141,6 +177,13 @@ def base(request, tmp_path):
     with BASES[request.param](tmp_path) as device:
         yield device
         device.close()
+
+
+@pytest.fixture(params=sorted(LASERS))
+def laser(request, tmp_path) -> Iterator[LaserUnderTest]:
+    with LASERS[request.param](tmp_path) as under_test:
+        yield under_test
+        under_test.device.close()
 
 
 # -- every device ----------------------------------------------------------------------------------
@@ -170,6 +213,10 @@ def test_a_head_is_used_only_while_connected(pantilt):
 
 def test_a_base_is_used_only_while_connected(base):
     check_connect_lifecycle(base, lambda d: d.pose())
+
+
+def test_a_laser_is_used_only_while_connected(laser):
+    check_connect_lifecycle(laser.device, lambda d: d.scan())
 
 
 # -- cameras ---------------------------------------------------------------------------------------
@@ -248,6 +295,43 @@ def test_a_base_goes_to_a_pose_within_5_cm_and_3_degrees(base):
     for got in (final, pose):
         assert got.distance_to(goal) < 0.05
         assert abs(got.heading_error_to(goal)) < math.radians(3.0)
+
+
+# -- lasers ----------------------------------------------------------------------------------------
+
+
+def test_a_laser_scan_is_fresh_and_the_next_one_newer(laser):
+    with laser.device as device:
+        stamps = []
+        for _ in range(3):
+            called = laser.now()
+            scan = device.scan()
+            assert called < scan.timestamp <= laser.now()  # taken after the call, not buffered
+            stamps.append(scan.timestamp)
+    assert stamps[0] < stamps[1] < stamps[2]
+
+
+def test_a_laser_scan_spans_its_field_of_view_counter_clockwise(laser):
+    with laser.device as device:
+        scan = device.scan()
+        assert isinstance(device.mount, LaserMount)
+    angles = scan.angles
+    assert angles.ndim == 1 and len(angles) >= 2 and scan.ranges.shape == angles.shape
+    steps = np.diff(angles)
+    assert np.all(steps > 0) and np.allclose(steps, steps[0], rtol=1e-6)
+    assert angles[-1] - angles[0] == pytest.approx(laser.fov)
+    assert angles[0] + angles[-1] == pytest.approx(0.0, abs=1e-9)  # -fov/2 right .. +fov/2 left
+
+
+def test_a_laser_reports_metres_within_its_range_or_nan(laser):
+    with laser.device as device:
+        scan = device.scan()
+    ranges = scan.ranges
+    assert ranges.dtype.kind == "f" and not np.isinf(ranges).any()
+    hits = ranges[np.isfinite(ranges)]
+    assert hits.size > 0 and np.all(hits >= 0.0) and np.all(hits <= scan.max_range)
+    assert 0.0 < scan.max_range < 100.0  # metres, not millimetres
+    assert scan.points().shape == (hits.size, 2)
 
 
 # -- clocks ----------------------------------------------------------------------------------------
