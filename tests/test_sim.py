@@ -23,9 +23,17 @@ from twin.core.devices import (
 )
 from twin.core.errors import InputError, TwinError
 from twin.core.geometry import CameraModel, Pose2D
-from twin.sim.drive import DiffDriveGeometry, Odometry
+from twin.sim.drive import DiffDriveGeometry, Odometry, StallMonitor
 from twin.sim.render import FrameRenderer
-from twin.sim.robot import CAMERA_NAME, SimCamera, SimRobot, make_sim_robot
+from twin.sim.robot import (
+    CAMERA_NAME,
+    STALL_DUTY,
+    STALL_TIME,
+    STALL_TORQUE,
+    SimCamera,
+    SimRobot,
+    make_sim_robot,
+)
 from twin.sim.training import training_views
 from twin.sim.world import World
 
@@ -167,9 +175,102 @@ def test_devices_need_connecting_and_capture_views_with_pose_and_pan() -> None:
 
 def test_base_reports_a_blocked_path_as_a_fault() -> None:
     sim, robot = make_sim_robot(start=Pose2D(1.3, 3.2, math.pi / 2))
-    with robot.base as base, pytest.raises(DeviceFaultError, match="blocked"):
+    with robot.base as base, pytest.raises(DeviceFaultError, match="touched the sofa"):
         base.go_to(Pose2D(0.8, 5.6, 0.0))  # straight through the sofa's arm and the table
     assert sim.world.warnings() == {}
+
+
+def _at_rest(sim: SimRobot) -> bool:
+    return bool(np.abs(sim.world.data.qvel[:6]).max() < 0.01)
+
+
+def test_driving_into_the_coffee_table_is_a_fault_naming_it() -> None:
+    sim, robot = make_sim_robot(start=Pose2D(1.6, 3.55, math.pi / 2))
+    with robot.base as base, pytest.raises(DeviceFaultError) as caught:
+        base.go_to(Pose2D(1.6, 4.7, math.pi / 2))  # the column meets the table top's edge
+    seen = caught.value.seen
+    assert "coffee_table" in seen and "contact" in seen
+    truth = sim.truth_pose()
+    assert f"({truth.x:.2f}, {truth.y:.2f}) m" in seen  # where, in the truth
+    assert 4.0 < truth.y < 4.3  # stopped at the table's edge (4.2 m), not under it
+    assert _at_rest(sim)
+
+
+def test_brushing_a_table_leg_is_a_fault_not_a_silent_turn() -> None:
+    """The right tyre grazes a leg of the coffee table by 1.5 cm: the base is knocked round,
+    and the drive stops at the touch instead of carrying on from a pose odometry never saw."""
+    start = Pose2D(2.4, 4.05, math.pi)
+    sim, robot = make_sim_robot(start=start)
+    with robot.base as base, pytest.raises(DeviceFaultError, match="coffee_table_leg"):
+        base.go_to(Pose2D(1.3, 4.05, math.pi))
+    truth = sim.truth_pose()
+    assert 1.9 < truth.x < 2.0  # where the tyre reaches the leg at x = 1.86 m
+    assert abs(math.degrees(truth.heading_error_to(start))) < 10.0
+    assert _at_rest(sim)
+
+
+def test_driving_into_a_wall_names_the_wall() -> None:
+    sim, robot = make_sim_robot(start=Pose2D(3.8, 3.9, 0.0))
+    with robot.base as base, pytest.raises(DeviceFaultError, match="wall_right"):
+        base.drive(0.3, 0.0, 5.0)
+    assert sim.truth_pose().x == pytest.approx(4.5 - 0.2, abs=0.01)  # chassis front at the wall
+
+
+def test_a_seized_wheel_stalls() -> None:
+    """No contact at all, but the left motor strains against its jammed wheel."""
+    sim, robot = make_sim_robot(start=Pose2D(2.5, 3.3, 0.0))
+    model = sim.world.model
+    model.dof_frictionloss[model.jnt_dofadr[model.joint("left_wheel").id]] = 100.0
+    with robot.base as base, pytest.raises(DeviceFaultError, match="left wheel motor stalled"):
+        base.drive(0.3, 0.0, 3.0)
+
+
+def test_a_wheel_pushing_a_wall_stalls_through_its_stick_slip() -> None:
+    """Pushed against a wall, the wheels grip and slip in turn: the torque drops under the stall
+    threshold several times a second. The stall still fires, within a second of the touch; a
+    rule needing an unbroken strain never did (and odometry ran on by a metre)."""
+    sim = SimRobot(World("living_room"), Pose2D(3.8, 3.9, 0.0))
+    monitor = StallMonitor(STALL_TORQUE, STALL_TIME, STALL_DUTY)
+    wheels = [sim.world.model.actuator(n).id for n in ("left_wheel", "right_wheel")]
+    sim.set_wheel_speeds(0.5, 0.0)
+    touched, stalled, strained_since, longest = None, None, None, 0.0
+    for _ in range(round(3.0 / sim.world.timestep)):  # step() alone: no guard stops it
+        sim.step()
+        now = sim.world.time
+        torque = sim.world.data.actuator_force[wheels]
+        left, right = monitor.update(now, float(torque[0]), float(torque[1]))
+        if touched is None and sim.contacts():
+            touched = now
+        if stalled is None and left and right:
+            stalled = now
+        if touched is not None:
+            if abs(float(torque[0])) >= STALL_TORQUE:
+                strained_since = now if strained_since is None else strained_since
+                longest = max(longest, now - strained_since)
+            else:
+                strained_since = None
+    assert touched is not None and stalled is not None
+    assert 0.0 < stalled - touched < 1.0
+    assert longest < STALL_TIME  # never strained for STALL_TIME on end: stick-slip
+    assert sim.odometry_pose().x - sim.truth_pose().x > 0.3  # the wheels spun on
+
+
+def test_the_stall_monitor_needs_a_full_window_and_forgets_old_strain() -> None:
+    monitor = StallMonitor(threshold=3.0, window=0.5, duty=0.5)
+    times = np.arange(0.0, 2.0, 0.004)
+    flags = []
+    for t in times:
+        # strained only between 0.5 s and 0.8 s: 0.3 s of strain
+        torque = 10.0 if 0.5 <= t < 0.8 else 1.0
+        flags.append(monitor.update(float(t), torque, 0.0))
+    stalled = np.array([left for left, _ in flags])
+    assert not np.array([right for _, right in flags]).any()
+    assert stalled.any()
+    first, last = times[stalled][0], times[stalled][-1]
+    assert first == pytest.approx(0.75, abs=0.01)  # half the window strained
+    assert last == pytest.approx(1.05, abs=0.01)  # and the strain has left the window
+    monitor.reset()
+    assert monitor.update(3.0, 10.0, 10.0) == (False, False)
 
 
 def test_base_rejects_out_of_range_drive_commands() -> None:

@@ -1,12 +1,14 @@
-"""Differential-drive kinematics: wheel odometry and a turn-drive-turn go-to-pose controller.
+"""Differential-drive kinematics: wheel odometry, stall detection, and a turn-drive-turn
+go-to-pose controller.
 
-Pure arithmetic, no MuJoCo: the sim feeds it wheel angles and applies the wheel speeds it
-returns, exactly as a real base's firmware would. Units: metres, radians, seconds.
+Pure arithmetic, no MuJoCo: the sim feeds it wheel angles and motor torques and applies the wheel
+speeds it returns, exactly as a real base's firmware would. Units: metres, radians, seconds.
 """
 
 from __future__ import annotations
 
 import math
+from collections import deque
 from dataclasses import dataclass
 
 from twin.core.devices import PIONEER_LIMITS, BaseLimits
@@ -39,6 +41,7 @@ class Odometry:
         self._left, self._right = left, right
 
     def update(self, left: float, right: float) -> None:
+        """Integrate the wheels' new angles (rad)."""
         r = self.geometry.wheel_radius
         dl, dr = (left - self._left) * r, (right - self._right) * r
         self._left, self._right = left, right
@@ -53,6 +56,50 @@ class Odometry:
     @property
     def pose(self) -> Pose2D:
         return Pose2D(self.x, self.y, self.yaw)
+
+
+class StallMonitor:
+    """Per-wheel stall flags from motor torque, as a base's firmware raises them from current.
+
+    A wheel is stalled once its motor has strained (``|torque| >= threshold``, N m) for at least
+    ``duty`` of the last ``window`` seconds. A share of the time, not an unbroken stretch: a base
+    pushing a wall slips and grips in turn (stick-slip), its torque dipping below the threshold
+    every ~0.1 s, and an unbroken-stretch rule restarted its clock at every dip, never firing
+    while the wheels spun in place and odometry ran on.
+    """
+
+    def __init__(self, threshold: float, window: float, duty: float = 0.5) -> None:
+        self.threshold, self.window, self.duty = threshold, window, duty
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget the history (a new motion starts)."""
+        self._samples: deque[tuple[float, bool, bool]] = deque()
+        self._last: float | None = None
+        self._strained = [0.0, 0.0]
+        self._covered = 0.0
+
+    def update(self, now: float, left: float, right: float) -> tuple[bool, bool]:
+        """Record the torques (N m) applied up to ``now`` (s); returns (left, right) stalled."""
+        flags = (abs(left) >= self.threshold, abs(right) >= self.threshold)
+        if self._last is None or now < self._last:
+            self._last = now
+            return False, False
+        span = now - self._last
+        self._last = now
+        self._samples.append((span, *flags))
+        self._covered += span
+        for i in (0, 1):
+            self._strained[i] += span * flags[i]
+        while self._samples and self._covered - self._samples[0][0] >= self.window:
+            old, *old_flags = self._samples.popleft()
+            self._covered -= old
+            for i in (0, 1):
+                self._strained[i] -= old * old_flags[i]
+        if self._covered < self.window * (1.0 - 1e-9):
+            return False, False
+        limit = self.duty * self._covered
+        return self._strained[0] >= limit, self._strained[1] >= limit
 
 
 def _approach(error: float, vmax: float, decel: float, gain: float) -> float:

@@ -5,6 +5,10 @@ Nothing here moves the robot by writing its pose except ``SimRobot.place``, whic
 start of a run (like lifting the robot onto its start mark). Driving and panning go through the
 actuators: the base by wheel speeds, the head by speed commands that the VC-C4-limited servos
 integrate (see models/peoplebot.xml).
+
+The twin is never kinder than the real base: a motor that strains stalls
+(``StallMonitor``), and any touch of the robot on anything but the floor while driving stops the
+base with a ``DeviceFaultError`` naming what was touched and where.
 """
 
 from __future__ import annotations
@@ -12,6 +16,7 @@ from __future__ import annotations
 import math
 import threading
 from collections.abc import Callable
+from dataclasses import dataclass
 
 import mujoco
 import numpy as np
@@ -31,7 +36,7 @@ from twin.core.devices import (
 )
 from twin.core.errors import InputError
 from twin.core.geometry import CameraModel, Pose2D
-from twin.sim.drive import DiffDriveGeometry, GoToController, Odometry
+from twin.sim.drive import DiffDriveGeometry, GoToController, Odometry, StallMonitor
 from twin.sim.render import FrameRenderer
 from twin.sim.world import DEFAULT_SCENE, World
 
@@ -39,9 +44,30 @@ CAMERA_NAME = "head_camera"
 ROBOT_CLEARANCE = 0.3  # m: the base's half-diagonal; a pose this far from furniture is free
 PAPER_CAMERA = CameraModel()  # 320x240, 45 degrees horizontal: the paper's camera
 HEAD_TOLERANCE = math.radians(0.2)  # a pan-tilt move is over when the joint is this close
-# Driving needs under 1 N m per wheel; pushing against furniture takes the friction limit (~5).
+# Driving needs under 1 N m per wheel; pushing against furniture takes the friction limit
+# (8-12 N m in stick-slip). A wheel stalls when it strains above STALL_TORQUE for at least
+# STALL_DUTY of the last STALL_TIME seconds (see drive.StallMonitor).
 STALL_TORQUE = 3.0  # N m
 STALL_TIME = 0.5  # s
+STALL_DUTY = 0.5
+
+
+@dataclass(frozen=True)
+class Contact:
+    """A touch between the robot and the scene: which robot geom, which scene geom and what it
+    belongs to (e.g. "coffee_table"), and where (map frame, metres)."""
+
+    robot_geom: str
+    scene_geom: str
+    owner: str
+    position: tuple[float, float, float]
+
+    def describe(self) -> str:
+        x, y, z = self.position
+        return (
+            f"its {self.robot_geom} touched the {self.owner} ({self.scene_geom}) at "
+            f"({x:.2f}, {y:.2f}, {z:.2f}) m"
+        )
 
 
 def _fmt(pose: Pose2D) -> str:
@@ -66,7 +92,10 @@ class SimRobot:
     """
 
     def __init__(
-        self, world: World, start: Pose2D | None = None, limits: BaseLimits = PIONEER_LIMITS
+        self,
+        world: World,
+        start: Pose2D | None = None,
+        limits: BaseLimits = PIONEER_LIMITS,
     ) -> None:
         self.world = world
         m = world.model
@@ -97,6 +126,11 @@ class SimRobot:
         self.geometry = DiffDriveGeometry(
             float(m.geom_size[wheel_geom, 0]), float(np.linalg.norm(left - right))
         )
+        # contacts: every geom of the robot against every scene geom but the floor
+        root = int(m.body_rootid[self._base])
+        self._robot_geom = np.asarray(m.body_rootid[m.geom_bodyid] == root)
+        self._ground = np.array([world.is_ground(g) for g in range(m.ngeom)], dtype=bool)
+        self.stall = StallMonitor(STALL_TORQUE, STALL_TIME, STALL_DUTY)
         lo, hi = m.actuator_ctrlrange[self._head_act[0]]
         tlo, thi = m.actuator_ctrlrange[self._head_act[1]]
         plo, phi = m.actuator_actrange[self._head_act[0]]
@@ -151,6 +185,31 @@ class SimRobot:
     def camera_position(self) -> np.ndarray:
         """Ground-truth optical centre (3,), metres."""
         return self.world.data.cam_xpos[self.camera_id].copy()
+
+    def contacts(self) -> list[Contact]:
+        """Touches between the robot and anything in the scene but the floor, now."""
+        d, m = self.world.data, self.world.model
+        if d.ncon == 0:
+            return []
+        pairs = d.contact.geom[: d.ncon]
+        mine = self._robot_geom[pairs]
+        crossing = mine[:, 0] != mine[:, 1]
+        if not crossing.any():
+            return []
+        found = []
+        for i in np.flatnonzero(crossing):
+            robot, other = (pairs[i, 0], pairs[i, 1]) if mine[i, 0] else (pairs[i, 1], pairs[i, 0])
+            if self._ground[other]:
+                continue
+            found.append(
+                Contact(
+                    m.geom(int(robot)).name or f"geom {robot}",
+                    m.geom(int(other)).name or f"geom {other}",
+                    self.world.geom_owner(int(other)),
+                    tuple(float(v) for v in d.contact.pos[i]),
+                )
+            )
+        return found
 
     # -- setting up -----------------------------------------------------------------------------
     def place(self, pose: Pose2D, pan: float = 0.0, tilt: float = 0.0, settle: float = 0.3) -> None:
@@ -235,7 +294,8 @@ class SimRobot:
         controller = GoToController(goal, self.drive_limits)
         dt = self.world.timestep
         end = self.world.time + timeout
-        stalled_since: float | None = None
+        asked = f"go to {_fmt(goal)}"
+        self.stall.reset()
         while not controller.done:
             if self.world.time >= end:
                 self.set_wheel_speeds(0.0, 0.0)
@@ -248,40 +308,58 @@ class SimRobot:
                 )
             self.set_wheel_speeds(*controller.command(self.odometry_pose(), dt))
             self.step()
-            stalled_since = self._stall_check(stalled_since, f"go to {_fmt(goal)}")
+            self._guard(asked)
         self.set_wheel_speeds(0.0, 0.0)
         self.advance(0.2)  # let the servos bring the wheels to rest
         return self.odometry_pose()
 
-    def _stall_check(self, since: float | None, asked: str) -> float | None:
-        """Raise if a wheel motor has strained for ``STALL_TIME``: the base pushes on something.
+    def _fault(self, asked: str, seen: str) -> DeviceFaultError:
+        """Stop the wheels, let the base come to rest (up to 1 s), and build the fault to raise;
+        ``seen`` gets the truth pose at rest appended (a knock can still turn the base)."""
+        self.set_wheel_speeds(0.0, 0.0)
+        qvel = self.world.data.qvel
+        for _ in range(20):
+            self.advance(0.05)
+            base = qvel[self._free_qvel : self._free_qvel + 6]
+            if np.abs(base[:3]).max() < 1e-3 and np.abs(base[3:]).max() < 1e-2:
+                break
+        return DeviceFaultError(
+            "sim base",
+            asked,
+            f"{seen}; at rest at {_fmt(self.truth_pose())} (truth)",
+            "choose a stop with a free straight path to it, and check the pose estimate "
+            "(odometry drifts)",
+        )
 
-        Like the Pioneer's stall flag (motor current), not like a position check: the wheels
-        slip against an obstacle, so odometry alone would think the base is moving.
+    def _guard(self, asked: str) -> None:
+        """Raise ``DeviceFaultError`` if the robot touches the scene (anything but the floor) or
+        a wheel motor stalls; called after every physics step of a drive.
+
+        The stall is like the Pioneer's flag (motor current, ``StallMonitor``), not a position
+        check: the wheels slip against an obstacle, so odometry alone would think the base moves.
+        A touch is caught at once, even one that turns the base without straining the motors.
         """
-        torque = np.abs(self.world.data.actuator_force[self._wheel_act])
-        if torque.max() < STALL_TORQUE:
-            return None
-        if since is None:
-            return self.world.time
-        if self.world.time - since > STALL_TIME:
-            self.set_wheel_speeds(0.0, 0.0)
-            raise DeviceFaultError(
-                "sim base",
-                asked,
-                f"wheel motors stalled: the path is blocked at {_fmt(self.truth_pose())}",
-                "choose a stop with a free straight path to it",
+        touches = self.contacts()
+        if touches:
+            pose = self.truth_pose()
+            raise self._fault(asked, f"contact: {touches[0].describe()}, truth pose {_fmt(pose)}")
+        torque = self.world.data.actuator_force[self._wheel_act]
+        left, right = self.stall.update(self.world.time, float(torque[0]), float(torque[1]))
+        if left or right:
+            which = "left and right" if left and right else "left" if left else "right"
+            pose = self.truth_pose()
+            raise self._fault(
+                asked, f"{which} wheel motor stalled: the path is blocked at {_fmt(pose)}"
             )
-        return since
 
     def drive(self, speed: float, turn_rate: float, duration: float) -> Pose2D:
         """Hold body speed (m/s) and turn rate (rad/s) for ``duration`` seconds, then stop."""
         self.set_wheel_speeds(speed, turn_rate)
-        stalled_since = None
+        self.stall.reset()
         asked = f"drive {speed:.2f} m/s, {turn_rate:.2f} rad/s for {duration:g} s"
         for _ in range(max(0, round(duration / self.world.timestep))):
             self.step()
-            stalled_since = self._stall_check(stalled_since, asked)
+            self._guard(asked)
         self.set_wheel_speeds(0.0, 0.0)
         self.advance(0.2)
         return self.odometry_pose()

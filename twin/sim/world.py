@@ -151,6 +151,26 @@ class World:
         names = (self.model.body(i).name for i in range(1, self.model.nbody))
         return [name for name in names if name]
 
+    def geom_owner(self, geom: int) -> str:
+        """What a geom belongs to, for messages: the name of its top-level body (the furniture,
+        e.g. "coffee_table"), or the geom's own name if it hangs on the world (a wall)."""
+        body = int(self.model.geom_bodyid[geom])
+        if body == 0:
+            return self.model.geom(geom).name or f"geom {geom}"
+        root = int(self.model.body_rootid[body])
+        return self.model.body(root).name or f"body {root}"
+
+    def is_ground(self, geom: int) -> bool:
+        """True for the floor: the geom named "floor", or an upward-facing plane on the world."""
+        model = self.model
+        if model.geom(geom).name == "floor":
+            return True
+        return (
+            int(model.geom_type[geom]) == int(mujoco.mjtGeom.mjGEOM_PLANE)
+            and int(model.geom_bodyid[geom]) == 0
+            and float(self.data.geom_xmat[geom, 8]) > 0.99
+        )
+
     def body_position(self, name: str) -> np.ndarray:
         """World position (3,) of a body's frame, metres (ground truth)."""
         return self.data.xpos[self.body_id(name)].copy()
