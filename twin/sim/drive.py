@@ -1,5 +1,5 @@
-"""Differential-drive kinematics: wheel odometry, stall detection, and a turn-drive-turn
-go-to-pose controller.
+"""Differential-drive kinematics: wheel odometry, its errors, stall detection, and a
+turn-drive-turn go-to-pose controller.
 
 Pure arithmetic, no MuJoCo: the sim feeds it wheel angles and motor torques and applies the wheel
 speeds it returns, exactly as a real base's firmware would. Units: metres, radians, seconds.
@@ -11,7 +11,10 @@ import math
 from collections import deque
 from dataclasses import dataclass
 
+import numpy as np
+
 from twin.core.devices import PIONEER_LIMITS, BaseLimits
+from twin.core.errors import InputError
 from twin.core.geometry import Pose2D, wrap_angle
 
 
@@ -28,11 +31,94 @@ class DiffDriveGeometry:
         return (v - half) / self.wheel_radius, (v + half) / self.wheel_radius
 
 
-class Odometry:
-    """Dead reckoning from wheel angle increments (exact arcs, not Euler steps)."""
+@dataclass(frozen=True)
+class OdometryErrors:
+    """How a real base's wheels differ from what its odometry assumes (all relative, no unit).
 
-    def __init__(self, geometry: DiffDriveGeometry, pose: Pose2D, left: float, right: float):
+    ``wheel_radius_error`` (left, right): the physical wheel's radius is ``(1 + e)`` times the
+    assumed one (0.01: 1 % larger, so odometry under-reports that wheel's travel by 1 %).
+    ``track_error``: the physical track (wheel contact spacing) is ``(1 + e)`` times the assumed.
+    ``slip_noise``: random slip per wheel; a wheel that rolls ``s`` metres is counted with an
+    error of standard deviation ``slip_noise * sqrt(s * 1 m)``, i.e. ``slip_noise`` metres per
+    metre after the first metre, growing with the square root of the distance (independent
+    increments, Chong & Kleeman 1997). ``seed`` seeds that noise.
+
+    The sim makes the first two physically true (the MuJoCo wheels and their spacing change) and
+    adds the slip to the odometry's wheel increments. The defaults are an ideal base.
+    """
+
+    wheel_radius_error: tuple[float, float] = (0.0, 0.0)
+    track_error: float = 0.0
+    slip_noise: float = 0.0
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        try:
+            left, right = (float(e) for e in self.wheel_radius_error)
+        except (TypeError, ValueError):
+            raise InputError(
+                f"wheel_radius_error must be two numbers (left, right), got "
+                f"{self.wheel_radius_error!r}"
+            ) from None
+        object.__setattr__(self, "wheel_radius_error", (left, right))
+        checks = (
+            ("wheel_radius_error", left, 0.1),
+            ("wheel_radius_error", right, 0.1),
+            ("track_error", self.track_error, 0.2),
+        )
+        for name, value, bound in checks:
+            if not (math.isfinite(value) and abs(value) <= bound):
+                raise InputError(
+                    f"odometry {name} {value!r} is not a relative error within +-{bound:g}; "
+                    "use e.g. 0.005 for 0.5 %"
+                )
+        if not (math.isfinite(self.slip_noise) and 0.0 <= self.slip_noise <= 0.1):
+            raise InputError(
+                f"odometry slip_noise {self.slip_noise!r} must be within [0, 0.1] "
+                "(relative standard deviation after 1 m)"
+            )
+
+    def physical(self, assumed: DiffDriveGeometry) -> tuple[float, float, float]:
+        """The real base's (left radius, right radius, track), metres, for the assumed geometry."""
+        left, right = self.wheel_radius_error
+        return (
+            assumed.wheel_radius * (1.0 + left),
+            assumed.wheel_radius * (1.0 + right),
+            assumed.track * (1.0 + self.track_error),
+        )
+
+    def turn_gain(self) -> float:
+        """True turn / odometry turn of a pivot on the spot (wheels turning equal and opposite):
+        ``(1 + (e_left + e_right) / 2) / (1 + track_error)``. 1.0 for an ideal base."""
+        left, right = self.wheel_radius_error
+        return (1.0 + 0.5 * (left + right)) / (1.0 + self.track_error)
+
+    def straight_drift(self, assumed: DiffDriveGeometry) -> float:
+        """True heading change (rad) per metre of a drive that odometry counts as straight
+        (both wheels turning through the same angle): ``(e_right - e_left) / track_true``."""
+        left, right = self.wheel_radius_error
+        return (right - left) / (assumed.track * (1.0 + self.track_error))
+
+
+class Odometry:
+    """Dead reckoning from wheel angle increments (exact arcs, not Euler steps).
+
+    With ``slip_noise`` > 0 (see ``OdometryErrors``) each wheel's counted increment gets a
+    zero-mean Gaussian error of variance ``slip_noise**2 * |increment|`` from ``rng``.
+    """
+
+    def __init__(
+        self,
+        geometry: DiffDriveGeometry,
+        pose: Pose2D,
+        left: float,
+        right: float,
+        slip_noise: float = 0.0,
+        rng: np.random.Generator | None = None,
+    ):
         self.geometry = geometry
+        self.slip_noise = slip_noise
+        self.rng = rng if rng is not None else np.random.default_rng(0)
         self.reset(pose, left, right)
 
     def reset(self, pose: Pose2D, left: float, right: float) -> None:
@@ -45,6 +131,10 @@ class Odometry:
         r = self.geometry.wheel_radius
         dl, dr = (left - self._left) * r, (right - self._right) * r
         self._left, self._right = left, right
+        if self.slip_noise > 0.0:
+            zl, zr = self.rng.standard_normal(2)
+            dl += self.slip_noise * math.sqrt(abs(dl)) * float(zl)
+            dr += self.slip_noise * math.sqrt(abs(dr)) * float(zr)
         ds, dyaw = 0.5 * (dl + dr), (dr - dl) / self.geometry.track
         # chord of the arc, taken along the mean heading
         chord = ds if abs(dyaw) < 1e-9 else 2.0 * ds / dyaw * math.sin(0.5 * dyaw)

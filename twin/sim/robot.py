@@ -6,7 +6,8 @@ start of a run (like lifting the robot onto its start mark). Driving and panning
 actuators: the base by wheel speeds, the head by speed commands that the VC-C4-limited servos
 integrate (see models/peoplebot.xml).
 
-The twin is never kinder than the real base: a motor that strains stalls
+The twin is never kinder than the real base: its wheels may differ from what odometry assumes
+(``OdometryErrors``, made physically true in the MuJoCo model), a motor that strains stalls
 (``StallMonitor``), and any touch of the robot on anything but the floor while driving stops the
 base with a ``DeviceFaultError`` naming what was touched and where.
 """
@@ -36,7 +37,13 @@ from twin.core.devices import (
 )
 from twin.core.errors import InputError
 from twin.core.geometry import CameraModel, Pose2D
-from twin.sim.drive import DiffDriveGeometry, GoToController, Odometry, StallMonitor
+from twin.sim.drive import (
+    DiffDriveGeometry,
+    GoToController,
+    Odometry,
+    OdometryErrors,
+    StallMonitor,
+)
 from twin.sim.render import FrameRenderer
 from twin.sim.world import DEFAULT_SCENE, World
 
@@ -88,7 +95,8 @@ class SimRobot:
     """The Peoplebot in a ``World``: the one place that steps the physics for it.
 
     Every blocking motion advances simulated time by stepping the world, applying the wheel and
-    head controls and integrating odometry at every physics step.
+    head controls and integrating odometry at every physics step. ``odometry_errors`` makes the
+    wheels differ from what odometry assumes (see ``set_odometry_errors``).
     """
 
     def __init__(
@@ -96,6 +104,7 @@ class SimRobot:
         world: World,
         start: Pose2D | None = None,
         limits: BaseLimits = PIONEER_LIMITS,
+        odometry_errors: OdometryErrors | None = None,
     ) -> None:
         self.world = world
         m = world.model
@@ -119,12 +128,17 @@ class SimRobot:
             int(m.jnt_dofadr[_id(m, mujoco.mjtObj.mjOBJ_JOINT, n)]) for n in ("pan", "tilt")
         ]
         self.camera_id = _id(m, mujoco.mjtObj.mjOBJ_CAMERA, CAMERA_NAME)
-        # geometry read from the model, so odometry and the MJCF cannot disagree
-        wheel_geom = _id(m, mujoco.mjtObj.mjOBJ_GEOM, "left_wheel")
-        left = m.body_pos[_id(m, mujoco.mjtObj.mjOBJ_BODY, "left_wheel")]
-        right = m.body_pos[_id(m, mujoco.mjtObj.mjOBJ_BODY, "right_wheel")]
+        # The geometry odometry assumes: the MJCF's as written (the world keeps it even after
+        # set_odometry_errors changed the physical wheels), so odometry and the file agree.
+        geom = mujoco.mjtObj.mjOBJ_GEOM
+        self._wheel_geoms = [_id(m, geom, n) for n in ("left_wheel", "right_wheel")]
+        self._tyre_geoms = [_id(m, geom, n) for n in ("left_tyre", "right_tyre")]
+        wheel_size, _ = world.loaded_geom(self._wheel_geoms[0])
+        centres = [
+            m.body_pos[m.geom_bodyid[g]] + world.loaded_geom(g)[1] for g in self._wheel_geoms
+        ]
         self.geometry = DiffDriveGeometry(
-            float(m.geom_size[wheel_geom, 0]), float(np.linalg.norm(left - right))
+            float(wheel_size[0]), float(np.linalg.norm(centres[0] - centres[1]))
         )
         # contacts: every geom of the robot against every scene geom but the floor
         root = int(m.body_rootid[self._base])
@@ -151,6 +165,7 @@ class SimRobot:
         # Held while stepping and rendering: the serial twins step the world from a thread.
         self.lock = threading.RLock()
         self.odometry = Odometry(self.geometry, Pose2D(0.0, 0.0, 0.0), 0.0, 0.0)
+        self.set_odometry_errors(odometry_errors or OdometryErrors())
         self.place(start or world.robot_start() or Pose2D(0.0, 0.0, 0.0))
 
     # -- state ----------------------------------------------------------------------------------
@@ -212,6 +227,44 @@ class SimRobot:
         return found
 
     # -- setting up -----------------------------------------------------------------------------
+    def set_odometry_errors(self, errors: OdometryErrors) -> None:
+        """Make the physical wheels differ from what odometry assumes, and seed the slip noise.
+
+        The MuJoCo wheels (and the tyres drawn over them) take the radii and spacing
+        ``errors.physical`` gives; odometry keeps the nominal ``self.geometry``. Measured from
+        the model as loaded, so setting errors twice does not compound. The slip noise restarts
+        from ``errors.seed`` here and at every ``place``.
+        """
+        m = self.world.model
+        left, right, track = errors.physical(self.geometry)
+        shift = 0.5 * (track - self.geometry.track)
+        for wheel, tyre, radius, side in zip(
+            self._wheel_geoms, self._tyre_geoms, (left, right), (1.0, -1.0), strict=True
+        ):
+            for geom in (wheel, tyre):
+                size, pos = self.world.loaded_geom(geom)
+                pos[1] += side * shift  # along the axle, which stays the hinge axis
+                kind = int(m.geom_type[geom])
+                # the rolling circle is in the geom's x-y plane, its z axis is the axle; the
+                # bounding radius and box are what the collision broad phase and renderer use
+                if kind == int(mujoco.mjtGeom.mjGEOM_ELLIPSOID):
+                    size[0] = size[1] = radius
+                    half_width = float(size[2])
+                    bound = max(radius, half_width)
+                elif kind == int(mujoco.mjtGeom.mjGEOM_SPHERE):
+                    size[0] = half_width = bound = radius
+                else:  # cylinder: radius, half-length
+                    size[0], half_width = radius, float(size[1])
+                    bound = math.hypot(radius, half_width)
+                m.geom_size[geom] = size
+                m.geom_pos[geom] = pos
+                m.geom_rbound[geom] = bound
+                m.geom_aabb[geom, 3:] = (radius, radius, half_width)
+        self.odometry_errors = errors
+        self.odometry.slip_noise = errors.slip_noise
+        self.odometry.rng = np.random.default_rng(errors.seed)
+        self.world.forward()
+
     def place(self, pose: Pose2D, pan: float = 0.0, tilt: float = 0.0, settle: float = 0.3) -> None:
         """Put the robot at rest at ``pose`` with the head at (pan, tilt), then let it settle.
 
@@ -238,6 +291,7 @@ class SimRobot:
         self._wheels = (0.0, 0.0)
         self.world.forward()
         self.advance(settle)
+        self.odometry.rng = np.random.default_rng(self.odometry_errors.seed)
         self.reset_odometry(pose)
 
     def reset_odometry(self, pose: Pose2D) -> None:
@@ -545,8 +599,9 @@ def make_sim_robot(
     start: Pose2D | None = None,
     camera: CameraModel = PAPER_CAMERA,
     pose_source: str = "odometry",
+    odometry_errors: OdometryErrors | None = None,
 ) -> tuple[SimRobot, Robot]:
     """Load a scene, put the robot at ``start`` (default: the scene's), return both the
     ``SimRobot`` (ground truth, world) and its devices as a ``twin.core.devices.Robot``."""
-    sim = SimRobot(World(scene), start)
+    sim = SimRobot(World(scene), start, odometry_errors=odometry_errors)
     return sim, sim.devices(camera, pose_source)

@@ -91,6 +91,9 @@ class World:
             self.model.vis.headlight.diffuse.copy(),
             self.model.vis.headlight.ambient.copy(),
         )
+        # Geom shapes as the files define them: what run-time changes (the sim robot's wheel
+        # errors) are measured from, so that applying them twice does not compound.
+        self._loaded_geoms = (self.model.geom_size.copy(), self.model.geom_pos.copy())
 
     def reset(self) -> None:
         """Put the world back as it was loaded: bodies moved by ``place_static_body`` return,
@@ -150,6 +153,12 @@ class World:
     def body_names(self) -> list[str]:
         names = (self.model.body(i).name for i in range(1, self.model.nbody))
         return [name for name in names if name]
+
+    def loaded_geom(self, geom: int) -> tuple[np.ndarray, np.ndarray]:
+        """(size (3,), position (3,) in its body) of a geom as the scene files define it, metres,
+        whatever was changed at run time since."""
+        size, pos = self._loaded_geoms
+        return size[geom].copy(), pos[geom].copy()
 
     def geom_owner(self, geom: int) -> str:
         """What a geom belongs to, for messages: the name of its top-level body (the furniture,
