@@ -119,3 +119,29 @@ def test_living_room_follows_the_papers_layout() -> None:
     assert box[2] - 0.15 == pytest.approx(world.surface_height(*box[:2], exclude="rice_box"))
     assert world.surface_height(*box[:2], exclude="rice_box") == pytest.approx(0.45)
     assert {"sofa", "coffee_table", "chair", "table", "bookcase"} <= set(world.furniture())
+
+
+def test_the_laser_sits_on_the_front_at_030_m_and_the_robot_is_outside_the_scene_groups() -> None:
+    """The LMS200's scan plane is 0.30 m above the floor at the base's front, its housing a
+    visible massless box within the chassis' footprint; every robot geom is in group 2 or 3, so
+    a cast at the scene's groups 0 and 1 never meets the robot."""
+    world = World("living_room")
+    model = world.model
+    base = world.body_id("base")
+    site = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_SITE, "laser")
+    assert model.site_bodyid[site] == base
+    x, y, z = model.site_pos[site]
+    assert (y, z) == pytest.approx((0.0, 0.30))
+    assert 0.1 < x < 0.2  # in front of the axle, behind the bumper
+    housing = model.geom("laser_housing").id
+    assert model.geom_group[housing] <= 2 and model.geom_contype[housing] == 0
+    chassis = model.geom("chassis").id
+    front = model.geom_pos[chassis, 0] + model.geom_size[chassis, 0]
+    assert model.geom_pos[housing, 0] + model.geom_size[housing, 0] <= front
+    own = model.body_rootid[model.geom_bodyid] == base
+    assert set(model.geom_group[own]) <= {2, 3}
+    assert set(model.geom_group[~own]) <= {0, 1}
+    # the wheels touch the floor where they should, as wide as the tyre drawn over them
+    wheel, tyre = model.geom("left_wheel").id, model.geom("left_tyre").id
+    assert model.geom_size[wheel, 0] == model.geom_size[tyre, 0]
+    assert model.geom_size[wheel, 2] == model.geom_size[tyre, 1]

@@ -44,6 +44,7 @@ from twin.sim.drive import (
     OdometryErrors,
     StallMonitor,
 )
+from twin.sim.laser import LaserSpec, SimLaser
 from twin.sim.render import FrameRenderer
 from twin.sim.world import DEFAULT_SCENE, World
 
@@ -453,10 +454,20 @@ class SimRobot:
         d = self.world.data
         self._head_goal = [float(d.act[a]) for a in self._head_actadr]
 
-    def devices(self, camera: CameraModel = PAPER_CAMERA, pose_source: str = "odometry") -> Robot:
-        """The sim camera, pan-tilt and base as a ``twin.core.devices.Robot`` (see ``SimBase`` for
-        ``pose_source``)."""
-        return Robot(SimCamera(self, camera), SimPanTilt(self), SimBase(self, pose_source))
+    def devices(
+        self,
+        camera: CameraModel = PAPER_CAMERA,
+        pose_source: str = "odometry",
+        laser: LaserSpec | None = None,
+    ) -> Robot:
+        """The sim camera, pan-tilt, base and (given its spec) laser as a
+        ``twin.core.devices.Robot`` (see ``SimBase`` for ``pose_source``)."""
+        return Robot(
+            SimCamera(self, camera),
+            SimPanTilt(self),
+            SimBase(self, pose_source),
+            None if laser is None else SimLaser(self, laser),
+        )
 
 
 class _SimDevice:
@@ -600,8 +611,10 @@ def make_sim_robot(
     camera: CameraModel = PAPER_CAMERA,
     pose_source: str = "odometry",
     odometry_errors: OdometryErrors | None = None,
+    laser: LaserSpec | None = None,
 ) -> tuple[SimRobot, Robot]:
     """Load a scene, put the robot at ``start`` (default: the scene's), return both the
-    ``SimRobot`` (ground truth, world) and its devices as a ``twin.core.devices.Robot``."""
+    ``SimRobot`` (ground truth, world) and its devices as a ``twin.core.devices.Robot``
+    (with a ``SimLaser`` if ``laser`` is given)."""
     sim = SimRobot(World(scene), start, odometry_errors=odometry_errors)
-    return sim, sim.devices(camera, pose_source)
+    return sim, sim.devices(camera, pose_source, laser)
