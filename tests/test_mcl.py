@@ -22,6 +22,7 @@ from twin.nav.mcl import (
     MclConfig,
     MonteCarloLocalizer,
     kld_bound,
+    log_likelihoods,
     low_variance_indices,
     sample_motion_odometry,
 )
@@ -240,6 +241,34 @@ def test_the_likelihood_field_crosses_zero_on_the_faces_of_obstacles():
     field = signed_surface_distance(wall)
     np.testing.assert_allclose(field[2], [0.45, 0.35, 0.25, 0.15, 0.05, -0.05, -0.15, -0.25])
     np.testing.assert_allclose(field, signed_surface_distance(wall, obstacle_distance(wall)))
+
+
+def test_the_likelihood_peaks_at_the_true_pose_not_half_a_cell_into_the_walls():
+    mcl = localizer(config=MclConfig(beams=181))
+    offsets = np.linspace(-0.04, 0.04, 33)  # 2.5 mm steps
+    poses_seen = (START, Pose2D(3.0, 0.8, 0.0), Pose2D(5.0, 2.5, 1.57), Pose2D(2.0, 3.0, 3.0))
+    for pose in poses_seen:
+        scan = scan_from(pose, np.random.default_rng(0), sigma=0.0, dropout=0.0)
+        hit = np.isfinite(scan.ranges)
+        r, a = scan.ranges[hit], scan.angles[hit]
+        beam_x, beam_y = MOUNT.x + r * np.cos(a), MOUNT.y + r * np.sin(a)
+        for axis in (0, 1):
+            poses = np.tile([pose.x, pose.y, pose.yaw], (len(offsets), 1)).astype(float)
+            poses[:, axis] += offsets
+            out = np.empty(len(poses))
+            log_likelihoods(
+                poses,
+                beam_x,
+                beam_y,
+                mcl._surface,
+                MAP.origin[0],
+                MAP.origin[1],
+                1.0 / MAP.resolution,
+                mcl._lut(MAX_RANGE),
+                1000.0,
+                out,
+            )
+            assert abs(offsets[np.argmax(out)]) <= 0.005, (pose, axis)
 
 
 # -- the pieces of the filter -----------------------------------------------------------------

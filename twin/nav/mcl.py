@@ -10,10 +10,13 @@ The textbook filter (Thrun, Burgard & Fox, *Probabilistic Robotics*, ch. 5, 6 an
   has no rot1 (its direction is noise). Every update also adds a small ``jitter`` (roughening):
   a robot standing still keeps being weighed, and duplicated particles must not stay identical.
 * **Measurement**: the likelihood field (6.4): a beam's end point at distance d from the nearest
-  occupied cell has likelihood ``z_hit N(d; 0, sigma_hit) + z_rand / max_range``; beams without a
+  obstacle has likelihood ``z_hit N(d; 0, sigma_hit) + z_rand / max_range``; beams without a
   return (NaN, or at max range) are left out, as the textbook does; of the rest ``beams`` are
-  used, evenly spread. The field is precomputed per cell (an exact distance transform,
-  ``twin.nav.distance``) as a log-likelihood table and read with bilinear interpolation.
+  used, evenly spread. d is the distance to the nearest face of an occupied cell, signed (an
+  exact distance transform, ``twin.nav.distance.signed_surface_distance``), read between cell
+  centres by bilinear interpolation, then turned into a log-likelihood by a 1 mm table. (The
+  textbook's distance to the nearest occupied cell centre, read so, is flat across a wall cell
+  and pulled every pose half a cell, 2.5 cm, towards the walls it saw most of.)
 * **Resampling**: low-variance (Table 4.4), only when the effective sample size
   ``1 / sum(w²)`` drops below ``resample_threshold × N``. The number drawn is KLD-sampling's bound
   (8.3.7) on the histogram bins the weighted set occupies, between ``particles`` and
@@ -24,8 +27,10 @@ The textbook filter (Thrun, Burgard & Fox, *Probabilistic Robotics*, ch. 5, 6 an
   w_slow)`` of the particles by poses drawn uniformly over the free cells. The likelihood they
   average is the per-beam geometric mean, so the number of beams a scan kept does not move it.
 * **Estimate**: weighted mean, circular mean for yaw, the 3 × 3 weighted covariance, the effective
-  sample size, and the weight within ``cluster_radius`` / ``cluster_angle`` of the mean (about 1
-  for one mode; two modes put the mean between them and this mass drops).
+  sample size, the weight within ``cluster_radius`` / ``cluster_angle`` of the mean (about 1 for
+  one mode; two modes put the mean between them and this mass drops), and the scan fit: the
+  fraction of the weighed beams that end near an obstacle seen from the mean pose (a tight cloud
+  in the wrong place, as just after a kidnapping, is unimodal but does not fit).
 
 Randomness comes only from the ``numpy.random.Generator`` handed in, so equal seeds give equal
 runs. The per-particle loops are compiled by numba (``cache=True``).
@@ -113,6 +118,9 @@ class MclConfig:
         for name, value in non_negative.items():
             if not (math.isfinite(value) and value >= 0):
                 raise InputError(f"MCL {name} must be zero or positive, got {value!r}")
+        for name, value in (("beams", self.beams), ("max_particles", self.max_particles)):
+            if int(value) != value:
+                raise InputError(f"MCL {name} must be a whole number, got {value!r}")
         if len(self.alphas) != 4 or not all(math.isfinite(a) and a >= 0 for a in self.alphas):
             raise InputError(f"MCL alphas must be four non-negative numbers, got {self.alphas!r}")
         for name, value in (
@@ -405,7 +413,8 @@ class MonteCarloLocalizer:
         self._surface = np.pad(surface, 1, constant_values=self._clip)
         self._luts: dict[float, np.ndarray] = {}
         self._alphas = np.asarray(self.config.alphas, dtype=float)
-        spawn = occupancy_map.free & (distance >= self.config.free_clearance)
+        faces = distance - occupancy_map.resolution / 2.0
+        spawn = occupancy_map.free & (faces >= self.config.free_clearance)
         self._spawn_cells = np.flatnonzero(spawn)
         self._odometry: Pose2D | None = None
         self._monitor = _Monitor()
@@ -605,7 +614,8 @@ class MonteCarloLocalizer:
         (augmented MCL); returns how many were random."""
         weights = np.exp(self._log_w)
         count = self._kld_count(weights)
-        injected = int(self.rng.binomial(count, self._monitor.inject_fraction))
+        fraction = self._monitor.inject_fraction if self._spawn_cells.size else 0.0
+        injected = int(self.rng.binomial(count, fraction)) if fraction > 0.0 else 0
         kept = count - injected
         parts = []
         if kept:
