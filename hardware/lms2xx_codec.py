@@ -504,8 +504,15 @@ def decode_power_on(t: Telegram) -> bytes:
     return _expect(t, Reply.POWER_ON)
 
 
-def is_reply(t: Telegram, code: int) -> bool:
-    return t.command == code
+def decode_incorrect_command(t: Telegram) -> None:
+    """``92``: the scanner refused the request (which requests provoke it is undocumented: an
+    unknown code, a wrong length, the wrong mode); it carries nothing but its status."""
+    _expect(t, Reply.INCORRECT, 0)
+
+
+def decode_reset_confirmation(t: Telegram) -> None:
+    """``91``: the scanner confirms a reset (``10``); ``90`` follows when it is ready."""
+    _expect(t, Reply.RESET_CONFIRM, 0)
 
 
 # -- configuration block (74 -> F4, 77 -> F7) ---------------------------------------------------

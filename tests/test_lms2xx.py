@@ -128,6 +128,18 @@ def test_centimetres_go_through_installation_mode_and_77(server):
         check_room(laser.scan(), Variant(180, 100), 0.001)
 
 
+def test_an_lms291s_34_byte_block_is_written_back_at_its_own_length():
+    srv = serve(model="LMS291")
+    try:
+        with laser_on(srv, units="cm") as laser:
+            [written] = [c for c in srv.emulator.commands() if c[0] == Command.WRITE_CONFIG]
+            assert len(written) == 1 + 34 and written[1 + 32 :] == bytes([2, 0])
+            assert laser.info.type.startswith("LMS291;") and len(laser.info.config.raw) == 34
+            check_room(laser.scan(), Variant(180, 100), 0.01)
+    finally:
+        srv.stop()
+
+
 def test_a_scanner_left_streaming_at_38400_is_found_there():
     clock = ManualClock()
     srv = serve(clock, baud=38400, mode=Mode.CONTINUOUS)

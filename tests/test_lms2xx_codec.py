@@ -171,9 +171,13 @@ def test_errors_counters_incorrect_command_and_reset_confirmation():
     assert codec.reply(h("B5 64 00 0A 00")) == counters
     assert codec.decode_counters(one_reply(counters)) == (200, 10)
     assert codec.reply(bytes([0x92])) == h("02 80 02 00 92 10 7F 33")
-    assert one_reply(h("02 80 02 00 92 10 7F 33")).command == codec.Reply.INCORRECT
+    codec.decode_incorrect_command(one_reply(h("02 80 02 00 92 10 7F 33")))
     assert codec.reply(bytes([0x91])) == h("02 80 02 00 91 10 79 30")
-    assert one_reply(h("02 80 02 00 91 10 79 30")).command == codec.Reply.RESET_CONFIRM
+    codec.decode_reset_confirmation(one_reply(h("02 80 02 00 91 10 79 30")))
+    with pytest.raises(ReplyError, match="expected a 92"):
+        codec.decode_incorrect_command(one_reply(h("02 80 02 00 91 10 79 30")))
+    with pytest.raises(ReplyError, match="0 data bytes"):
+        codec.decode_reset_confirmation(one_reply(codec.reply(bytes([0x91, 0x00]))))
 
 
 def test_the_type_string():
@@ -235,6 +239,20 @@ def test_full_scans_of_the_square_room(variant, head, tail, size):
     assert ranges[[0, variant.count // 2, -1]] == pytest.approx([2.0, 2.0, 2.0])
     quarter = variant.count // 4
     assert ranges[[quarter, -1 - quarter]] == pytest.approx([2.828, 2.828])
+
+
+def test_count_word_bit_10_is_sent_zero_and_ignored_when_read():
+    """No source uses bit 10 (the spec marks it): 0 out, and the count is bits 0-9 only, never
+    [PLAYER]'s 14-bit or [MRPT]'s 9-bit mask."""
+    assert codec.count_word(721, Units.MM) == 0x42D1 and not codec.count_word(721, 1) & 0x400
+    scan = codec.decode_scan(one_reply(codec.reply(h("B0 02 44 E8 03 D0 07"))))
+    assert scan.count == 2 and scan.units == Units.MM and not scan.partial
+
+
+def test_a_34_byte_configuration_block_is_read_as_long_as_len_says():
+    block = codec.default_config(34)
+    read = codec.decode_config(one_reply(codec.reply(bytes([0xF4]) + block.raw)))
+    assert read == block and len(read.raw) == 34 and read.raw[32:] == h("02 00")
 
 
 def test_partial_scan_count_words_of_mode_2a():

@@ -304,7 +304,9 @@ def test_reset_confirms_returns_to_9600_and_announces_itself():
     bench.run(0.3)
     bench.take()
     items = bench.ask(codec.reset_request(), wait=0.2)
-    assert any(isinstance(t, Telegram) and t.command == Reply.RESET_CONFIRM for t in items)
+    confirmations = [t for t in replies(items) if t.command == Reply.RESET_CONFIRM]
+    assert len(confirmations) == 1
+    codec.decode_reset_confirmation(confirmations[0])
     assert bench.emu.baud == 9600 and bench.emu.mode == Mode.ON_REQUEST
     bench.host = 9600
     bench.run(0.3)
