@@ -252,6 +252,18 @@ def test_a_power_cycled_scanner_is_configured_again(server):
         assert laser.reconnects == 1 and laser.info.found_baud == 9600
 
 
+def test_a_restart_announced_by_90_is_configured_again_without_waiting_for_a_timeout(server):
+    clock = server.clock
+    with laser_on(server, baud=9600) as laser:  # at 9600 the host hears the 90 telegram
+        laser.scan()
+        server.emulator.power_cycle(clock.now())
+        clock.sleep(0.5)  # the 90 comes 0.2 s after power-up
+        # without the 90 the stream's end would only show as this call's time-out
+        check_room(laser.scan(timeout=0.6), Variant(180, 100), 0.001)
+        assert laser.reconnects == 1
+        assert commands(server)[-1] == "20 24"
+
+
 def test_a_lost_line_is_reopened_and_the_scanner_found_where_it_was(server):
     with laser_on(server) as laser:
         laser.scan()
