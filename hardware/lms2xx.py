@@ -253,36 +253,37 @@ class LMS2xx(Laser):
         asked = "read a scan"
         with self._call_lock:
             self.require_connected(asked)
-            for attempt in range(2):
-                self._recover(asked)
-                called = self.clock.now()
-                try:
-                    return self._await_scan(called, called + timeout, timeout, asked)
-                except ConnectionLostError:
-                    if not self.auto_reconnect or attempt:
-                        raise
-            raise AssertionError("unreachable")
+            self._recover(asked)
+            try:
+                return self._await_scan(timeout, asked)
+            except ConnectionLostError:
+                if not self.auto_reconnect:
+                    raise
+            # the line died while we waited: open it again and wait once more, a full timeout
+            self._recover(asked)
+            return self._await_scan(timeout, asked)
 
     # -- waiting for scans ----------------------------------------------------------------------
     def _recover(self, asked: str) -> None:
         """Reopen a lost line, or configure a scanner whose stream stopped, before using it."""
         if self._lost is None and not self._stale:
             return
-        if self._lost is not None and not self.auto_reconnect:
-            raise self._lost
-        if self._lost is None and not self.auto_reconnect:
-            return  # stale but no recovery wanted: wait for scans as they come
+        if not self.auto_reconnect:
+            if self._lost is not None:
+                raise self._lost
+            return  # a stream that stopped, no recovery wanted: wait for scans as they come
+        what = "the line was lost" if self._lost is not None else "the scans had stopped"
         try:
             self.reconnect()
         except DeviceError as exc:
             raise type(exc)(
-                self.name,
-                asked,
-                f"the scanner was lost and configuring it again failed ({exc.seen})",
-                exc.remedy,
+                self.name, asked, f"{what} and configuring it again failed ({exc.seen})", exc.remedy
             ) from None
 
-    def _await_scan(self, called: float, deadline: float, timeout: float, asked: str) -> Scan:
+    def _await_scan(self, timeout: float, asked: str) -> Scan:
+        """The first scan whose sweep began after now, within ``timeout`` seconds."""
+        called = self.clock.now()
+        deadline = called + timeout
         with self._cond:
             while True:
                 got = self._latest

@@ -197,6 +197,42 @@ def test_a_silent_scanner_is_a_timeout_naming_every_rate_tried(server):
     assert clock.now() - began == pytest.approx(4 * 2 * 1.0)  # 4 rates x 2 tries x 1 s
 
 
+class Loopback:
+    """A port whose cable is looped back on itself: every byte sent comes back (a wrong port
+    with an echoing device on it)."""
+
+    name = "loopback"
+
+    def __init__(self, clock: ManualClock) -> None:
+        self.clock, self.buf = clock, bytearray()
+
+    def write(self, data: bytes) -> None:
+        self.buf += data
+
+    def read(self, size: int, timeout: float) -> bytes:
+        if not self.buf:
+            self.clock.sleep(timeout)
+        out = bytes(self.buf[:size])
+        del self.buf[:size]
+        return out
+
+    def reset_input(self) -> None:
+        self.buf.clear()
+
+    def set_baudrate(self, baudrate: int) -> None:
+        pass
+
+    def close(self) -> None:
+        pass
+
+
+def test_a_port_where_bytes_come_but_no_lms_telegram_is_named_as_such():
+    clock = ManualClock()
+    laser = LMS2xx(lambda: Loopback(clock), clock=clock, probe_rates=(9600,), probe_tries=1)
+    with pytest.raises(DeviceTimeoutError, match=r"at 9600, 38400 baud \(16 bytes came, none"):
+        laser.connect()  # its own 20 25 (8 bytes, addressed to a scanner) back at both rates
+
+
 def test_a_stream_that_falls_silent_times_out_and_the_next_call_configures_again(server):
     clock = server.clock
     with laser_on(server) as laser:
