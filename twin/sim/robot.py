@@ -141,10 +141,13 @@ class SimRobot:
         self.geometry = DiffDriveGeometry(
             float(wheel_size[0]), float(np.linalg.norm(centres[0] - centres[1]))
         )
-        # contacts: every geom of the robot against every scene geom but the floor
+        # contacts: every geom of the robot (1) against every scene geom (2) but the floor (0);
+        # a plain list, as the check runs at every step of a drive and pairs are few
         root = int(m.body_rootid[self._base])
-        self._robot_geom = np.asarray(m.body_rootid[m.geom_bodyid] == root)
-        self._ground = np.array([world.is_ground(g) for g in range(m.ngeom)], dtype=bool)
+        self._geom_side = [
+            1 if int(m.body_rootid[m.geom_bodyid[g]]) == root else 0 if world.is_ground(g) else 2
+            for g in range(m.ngeom)
+        ]
         self.stall = StallMonitor(STALL_TORQUE, STALL_TIME, STALL_DUTY)
         lo, hi = m.actuator_ctrlrange[self._head_act[0]]
         tlo, thi = m.actuator_ctrlrange[self._head_act[1]]
@@ -204,24 +207,19 @@ class SimRobot:
 
     def contacts(self) -> list[Contact]:
         """Touches between the robot and anything in the scene but the floor, now."""
-        d, m = self.world.data, self.world.model
+        d, m, side = self.world.data, self.world.model, self._geom_side
         if d.ncon == 0:
             return []
-        pairs = d.contact.geom[: d.ncon]
-        mine = self._robot_geom[pairs]
-        crossing = mine[:, 0] != mine[:, 1]
-        if not crossing.any():
-            return []
         found = []
-        for i in np.flatnonzero(crossing):
-            robot, other = (pairs[i, 0], pairs[i, 1]) if mine[i, 0] else (pairs[i, 1], pairs[i, 0])
-            if self._ground[other]:
+        for i, (a, b) in enumerate(d.contact.geom[: d.ncon].tolist()):
+            if side[a] + side[b] != 3:  # robot-floor, scene-scene, robot-robot
                 continue
+            robot, other = (a, b) if side[a] == 1 else (b, a)
             found.append(
                 Contact(
-                    m.geom(int(robot)).name or f"geom {robot}",
-                    m.geom(int(other)).name or f"geom {other}",
-                    self.world.geom_owner(int(other)),
+                    m.geom(robot).name or f"geom {robot}",
+                    m.geom(other).name or f"geom {other}",
+                    self.world.geom_owner(other),
                     tuple(float(v) for v in d.contact.pos[i]),
                 )
             )
@@ -309,7 +307,8 @@ class SimRobot:
         for act, actadr, goal, speed in zip(
             self._head_act, self._head_actadr, self._head_goal, self._head_speed, strict=True
         ):
-            d.ctrl[act] = float(np.clip((goal - d.act[actadr]) / dt, -speed, speed))
+            rate = (goal - float(d.act[actadr])) / dt
+            d.ctrl[act] = min(max(rate, -speed), speed)  # plain floats: this runs every step
 
     def step(self) -> None:
         with self.lock:
