@@ -198,6 +198,7 @@ class LMS2xx(Laser):
         self.stray_telegrams = 0
         self.reconnects = 0
         self.bytes_received = 0
+        self.last_status: int | None = None  # status byte of the last scan returned
 
     @classmethod
     def open(cls, port: str, **options: object) -> LMS2xx:
@@ -310,6 +311,11 @@ class LMS2xx(Laser):
                 self._cond.wait(min(deadline - now, 0.05))
 
     def _check_status(self, status: int, asked: str) -> None:
+        """Raise on a scan whose status byte reports an error (3) or a fatal error (4) in bits
+        0-2 (section 7). Bits 3-4 (``10`` in every normal telegram) are undocumented and
+        ignored; so is the pollution bit 7, since the ranges still come (GBX and RL fail on
+        it): ``last_status`` keeps the byte for whoever wants to warn."""
+        self.last_status = status
         level = status & 0x07
         if level >= 3:
             raise DeviceFaultError(

@@ -264,8 +264,9 @@ def test_a_scanner_reporting_an_error_in_its_status_byte_is_a_fault(server):
         server.emulator.faults.scan_status = 0x13
         with pytest.raises(DeviceFaultError, match=r"an error \(status byte 13\)"):
             laser.scan()
-        server.emulator.faults.scan_status = None
-        laser.scan()
+        server.emulator.faults.scan_status = 0x90  # pollution: reported, the ranges still come
+        check_room(laser.scan(), Variant(180, 100), 0.001)
+        assert laser.last_status == 0x90
 
 
 def test_a_request_the_scanner_does_not_know_is_a_protocol_error(server, monkeypatch):
@@ -281,11 +282,32 @@ def test_a_power_cycled_scanner_is_configured_again(server):
     clock = server.clock
     with laser_on(server) as laser:
         laser.scan()
+        before = len(commands(server))
         server.emulator.power_cycle(clock.now())  # back at 9600, mode 25: the stream stops
         with pytest.raises(DeviceTimeoutError):
             laser.scan(timeout=0.5)
         check_room(laser.scan(), Variant(180, 100), 0.001)
         assert laser.reconnects == 1 and laser.info.found_baud == 9600
+        # the variant survived in the scanner's EEPROM (the emulator's choice): no 3B again
+        assert commands(server)[before:] == ["20 25", "20 40", "3A", "31", "74", "20 24"]
+
+
+def test_a_refused_mode_change_names_the_scanners_answer(server, monkeypatch):
+    mode_change = emulated._HANDLERS[Command.MODE]
+
+    def other_password(emu, data, now):  # a scanner whose password was changed
+        if data[:1] == bytes([Mode.INSTALLATION]):
+            emu._reply(now, bytes([0xA0, 0x01]))
+        else:
+            mode_change(emu, data, now)
+
+    monkeypatch.setitem(emulated._HANDLERS, Command.MODE, other_password)
+    with pytest.raises(DeviceFaultError) as caught:
+        laser_on(server, units="cm").connect()
+    assert str(caught.value) == (
+        "SICK LMS2xx: enter installation mode: the scanner answered A0 01 (refused: wrong "
+        "password); check the password (SICK_LMS)"
+    )
 
 
 def test_a_restart_announced_by_90_is_configured_again_without_waiting_for_a_timeout(server):
