@@ -81,6 +81,8 @@ class OccupancyGridMapper:
         self.origin = (x_min, y_min)
         self.mount = mount or LaserMount()
         self.log_odds = np.zeros((ny, nx))
+        self._hit_sum = np.zeros((ny, nx, 2))
+        self._hit_count = np.zeros((ny, nx), dtype=np.int64)
         self.observed = np.zeros((ny, nx), dtype=bool)
         self._hit_stamp = np.full((ny, nx), -1, dtype=np.int64)
         self._free_stamp = np.full((ny, nx), -1, dtype=np.int64)
@@ -113,6 +115,8 @@ class OccupancyGridMapper:
         _integrate_scan(
             self.log_odds,
             self.observed,
+            self._hit_sum,
+            self._hit_count,
             self._hit_stamp,
             self._free_stamp,
             self._scans,
@@ -131,6 +135,12 @@ class OccupancyGridMapper:
         )
         self._scans += 1
 
+    def surface_points(self) -> np.ndarray:
+        """(ny, nx, 2): where in each cell the returns fell on average (metres, map frame),
+        NaN in cells without one: the surface within the cell, for the scan matcher."""
+        with np.errstate(invalid="ignore", divide="ignore"):
+            return self._hit_sum / self._hit_count[..., None]
+
     def to_map(self, occupied_thresh: float = 0.65, free_thresh: float = 0.196) -> OccupancyMap:
         """The grid as an ``OccupancyMap``: each observed cell's probability, never-observed
         cells ``UNKNOWN``."""
@@ -145,6 +155,8 @@ class OccupancyGridMapper:
 def _integrate_scan(
     log_odds,
     observed,
+    hit_sum,
+    hit_count,
     hit_stamp,
     free_stamp,
     stamp,
@@ -171,7 +183,12 @@ def _integrate_scan(
         reach = (lengths[k] + 1e-6) / res
         ix = math.floor(gx + reach * math.cos(bearings[k]))
         iy = math.floor(gy + reach * math.sin(bearings[k]))
-        if 0 <= ix < nx and 0 <= iy < ny and hit_stamp[iy, ix] != stamp:
+        if not (0 <= ix < nx and 0 <= iy < ny):
+            continue
+        hit_sum[iy, ix, 0] += sx + lengths[k] * math.cos(bearings[k])
+        hit_sum[iy, ix, 1] += sy + lengths[k] * math.sin(bearings[k])
+        hit_count[iy, ix] += 1
+        if hit_stamp[iy, ix] != stamp:
             hit_stamp[iy, ix] = stamp
             log_odds[iy, ix] = min(log_odds[iy, ix] + l_hit, l_max)
             observed[iy, ix] = True
@@ -272,7 +289,10 @@ class MapBuilder:
         match: MatchResult | None = None
         if self._trajectory and int(np.isfinite(scan.ranges).sum()) >= self.min_points:
             table = LikelihoodTable(
-                self.mapper.to_map(), sigma_m=self.sigma_m, coarse_cells=self.coarse_cells
+                self.mapper.to_map(),
+                sigma_m=self.sigma_m,
+                coarse_cells=self.coarse_cells,
+                surface_points=self.mapper.surface_points(),
             )
             match = self.matcher.match(table, scan, predicted)
         corrected = predicted if match is None else match.pose

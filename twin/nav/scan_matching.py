@@ -112,11 +112,14 @@ def surface_cells(occupied: np.ndarray) -> np.ndarray:
 class LikelihoodTable:
     """Olson's lookup table of a map: per cell, the log-likelihood of a return there.
 
-    ``fine[row, col]`` = -min(d, ``max_distance_m``)² / (2 ``sigma_m``²) with d the distance
-    (m) from the cell's centre to the nearest occupied cell's on an obstacle's outline
-    (``surface_cells``); ``floor`` is its least value
-    (also used off the map); ``coarse`` holds block maxima of ``coarse_cells`` x
-    ``coarse_cells`` fine cells (see the module's docstring), offset by ``coarse_cells - 1``.
+    Each occupied cell on an obstacle's outline (``surface_cells``) stands for one point of
+    the surface: its centre, or where the returns in it fell on average when the map's builder
+    knows (``surface_points``, (ny, nx, 2) metres, NaN where unknown), which keeps what the
+    laser saw finer than the cells. ``fine[row, col]`` = -min(d, ``max_distance_m``)² /
+    (2 ``sigma_m``²) with d the distance (m) from the cell's centre to the nearest such point;
+    ``floor`` is its least value (also used off the map); ``coarse`` holds block maxima of
+    ``coarse_cells`` x ``coarse_cells`` fine cells (see the module's docstring), offset by
+    ``coarse_cells - 1``; ``anchors`` (ny, nx, 2) the surface points (NaN elsewhere).
     """
 
     def __init__(
@@ -125,6 +128,7 @@ class LikelihoodTable:
         sigma_m: float = 0.05,
         max_distance_m: float | None = None,
         coarse_cells: int = 4,
+        surface_points: np.ndarray | None = None,
     ) -> None:
         if not (math.isfinite(sigma_m) and sigma_m > 0):
             raise InputError(f"sigma_m must be a positive number of metres, got {sigma_m!r}")
@@ -134,14 +138,50 @@ class LikelihoodTable:
             raise InputError(f"max_distance_m must be positive, got {max_distance_m!r}")
         if not (isinstance(coarse_cells, int) and coarse_cells >= 1):
             raise InputError(f"coarse_cells must be a whole number >= 1, got {coarse_cells!r}")
-        self.resolution = occupancy_map.resolution
+        self.resolution = res = occupancy_map.resolution
         self.origin = (float(occupancy_map.origin[0]), float(occupancy_map.origin[1]))
         self.sigma_m = float(sigma_m)
         self.coarse_cells = coarse_cells
         self.floor = -(max_distance_m**2) / (2.0 * sigma_m**2)
-        d2 = distance_field(surface_cells(occupancy_map.occupied)) * self.resolution**2
-        self.fine = np.maximum(-d2 / (2.0 * sigma_m**2), self.floor)
+        surface = surface_cells(occupancy_map.occupied)
+        anchors = np.full((*occupancy_map.shape, 2), np.nan)
+        rows, cols = np.nonzero(surface)
+        anchors[rows, cols, 0], anchors[rows, cols, 1] = occupancy_map.center_of(rows, cols)
+        if surface_points is not None:
+            points = np.asarray(surface_points, dtype=float)
+            if points.shape != anchors.shape:
+                raise InputError(
+                    f"surface_points must be (ny, nx, 2) = {anchors.shape}, got {points.shape}"
+                )
+            known = surface & np.isfinite(points).all(axis=2)
+            anchors[known] = points[known]
+        self.anchors = anchors
+        reach = math.ceil(max_distance_m / res) + 1
+        self.fine = _anchor_table(
+            anchors, *self.origin, res, 1.0 / (2.0 * sigma_m**2), self.floor, reach
+        )
         self.coarse = _block_max(self.fine, coarse_cells)
+
+
+@njit(cache=True)
+def _anchor_table(anchors, x0, y0, res, inv_two_var, floor, reach):
+    """Per cell: the best log-likelihood -d² / (2 sigma²) over the surface points within
+    ``reach`` cells, at least ``floor``."""
+    ny, nx = anchors.shape[0], anchors.shape[1]
+    table = np.full((ny, nx), floor)
+    for r in range(ny):
+        for c in range(nx):
+            ax, ay = anchors[r, c, 0], anchors[r, c, 1]
+            if not np.isfinite(ax):
+                continue
+            for rr in range(max(r - reach, 0), min(r + reach + 1, ny)):
+                dy = y0 + (rr + 0.5) * res - ay
+                for cc in range(max(c - reach, 0), min(c + reach + 1, nx)):
+                    dx = x0 + (cc + 0.5) * res - ax
+                    value = -(dx * dx + dy * dy) * inv_two_var
+                    if value > table[rr, cc]:
+                        table[rr, cc] = value
+    return table
 
 
 @njit(cache=True)
@@ -270,8 +310,7 @@ class CorrelativeScanMatcher:
         x, y, yaw = prior.x + i * res, prior.y + j * res, prior.yaw + float(yaw_offsets[k])
         if self.refine:
             x, y, yaw = _refine(
-                table.fine,
-                table.floor,
+                table.anchors,
                 points,
                 np.array([x, y, yaw]),
                 np.array([prior.x, prior.y, prior.yaw]),
@@ -279,6 +318,7 @@ class CorrelativeScanMatcher:
                 table.origin[1],
                 res,
                 self.yaw_step,
+                1.0 / (2.0 * table.sigma_m**2),
                 w_xy,
                 w_yaw,
             )
@@ -382,38 +422,41 @@ def _search(fine, coarse, floor, d, cells, half, yaw_offsets, res, w_xy, w_yaw, 
 
 
 @njit(cache=True)
-def _smooth_score(fine, floor, points, x, y, yaw, x0, y0, res):
-    """The score of a continuous pose: the table read with bilinear interpolation between
-    cell centres (``floor`` off the map)."""
-    ny, nx = fine.shape
+def _anchor_score(anchors, points, x, y, yaw, x0, y0, res, inv_two_var, reach):
+    """The score of a continuous pose: each return scores -d² / (2 sigma²) for the distance d
+    to the nearest surface point within ``reach`` cells of it (at least that of ``reach``
+    cells), so the refinement sees where within their cells the surfaces are."""
+    ny, nx = anchors.shape[0], anchors.shape[1]
     c, s = math.cos(yaw), math.sin(yaw)
+    limit = (reach * res) ** 2
     total = 0.0
     for p in range(points.shape[0]):
-        gx = (x + c * points[p, 0] - s * points[p, 1] - x0) / res - 0.5
-        gy = (y + s * points[p, 0] + c * points[p, 1] - y0) / res - 0.5
-        ix, iy = math.floor(gx), math.floor(gy)
-        fx, fy = gx - ix, gy - iy
-        value = 0.0
-        for dy in range(2):
-            for dx in range(2):
-                row, col = iy + dy, ix + dx
-                v = fine[row, col] if 0 <= row < ny and 0 <= col < nx else floor
-                value += v * (fx if dx else 1.0 - fx) * (fy if dy else 1.0 - fy)
-        total += value
+        px = x + c * points[p, 0] - s * points[p, 1]
+        py = y + s * points[p, 0] + c * points[p, 1]
+        col, row = math.floor((px - x0) / res), math.floor((py - y0) / res)
+        best = limit
+        for rr in range(max(row - reach, 0), min(row + reach + 1, ny)):
+            for cc in range(max(col - reach, 0), min(col + reach + 1, nx)):
+                ax = anchors[rr, cc, 0]
+                if np.isfinite(ax):
+                    dx, dy = px - ax, py - anchors[rr, cc, 1]
+                    best = min(best, dx * dx + dy * dy)
+        total -= best * inv_two_var
     return total
 
 
 @njit(cache=True)
-def _refine(fine, floor, points, start, prior, x0, y0, res, yaw_step, w_xy, w_yaw):
-    """Sub-voxel pose: a pattern search on the interpolated score from the best voxel, moving
-    by half a voxel, then a quarter, ... down to 1/64, and never beyond one voxel from it."""
+def _refine(anchors, points, start, prior, x0, y0, res, yaw_step, inv_two_var, w_xy, w_yaw):
+    """Sub-voxel pose: a pattern search on ``_anchor_score`` from the best voxel, moving by half
+    a voxel, then a quarter, ... down to 1/64, and never beyond one voxel from it."""
     pose = start.copy()
     steps = np.array([res, res, yaw_step])
 
     def objective(q):
         d = q - prior
         penalty = 0.5 * (w_xy * (d[0] * d[0] + d[1] * d[1]) + w_yaw * d[2] * d[2])
-        return _smooth_score(fine, floor, points, q[0], q[1], q[2], x0, y0, res) - penalty
+        score = _anchor_score(anchors, points, q[0], q[1], q[2], x0, y0, res, inv_two_var, 2)
+        return score - penalty
 
     best = objective(pose)
     scale = 0.5
