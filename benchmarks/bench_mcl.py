@@ -171,9 +171,12 @@ def main() -> None:
             f"1 s: mean {100 * settled[:, 0].mean():.1f} cm, max {100 * settled[:, 0].max():.1f}"
             f" cm, max {math.degrees(settled[:, 1].max()):.2f} deg"
         )
-    print("\nglobal localization (no start pose, 5000 particles falling to 500), 60 beams:")
+    print(
+        "\nglobal localization (no start pose: 50 000 poses weigh the first scan, 5000 are kept,"
+        " falling to 500 as it converges), 60 beams:"
+    )
     scans = scans_along(occupancy, truth, 181, seed=3)
-    for seed in range(5):
+    for seed in range(8):
         mcl = MonteCarloLocalizer(occupancy, MOUNT, rng=np.random.default_rng(10 + seed))
         found, times = None, []
         for k, (pose, odo, scan) in enumerate(zip(truth, odometry, scans, strict=True)):
