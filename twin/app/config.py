@@ -21,11 +21,11 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from twin.app.device_types import ROLES, device_type, types_of
+from twin.app.device_types import OPTIONAL_ROLES, ROLES, device_type, types_of
 from twin.core.errors import InputError
 from twin.core.fusion import RULES, FusionRule, make_rule
 from twin.core.grid import GridSpec
-from twin.core.options import OptionError, parse_options
+from twin.core.options import OptionError, option, parse_options
 from twin.resources import scenes_dir
 
 DEFAULT_CONFIG_NAME = "living_room_survey.toml"
@@ -86,6 +86,36 @@ class ObjectConfig:
 
 
 @dataclass(frozen=True)
+class LocalizationOptions:
+    """``[localization]``: how a base with ``pose_source = "laser"`` localizes on a map."""
+
+    map: str = option(
+        "scene",
+        doc="the map: a map_server YAML file (as slam_toolbox, Cartographer, gmapping or "
+        '"twin map" write them), or "scene" to cut it from the scene at the laser\'s height',
+    )
+    resolution: float = option(0.05, unit="m", low=0.01, high=0.5, doc='cells of a "scene" map')
+    particles: int = option(500, low=50, high=20000, doc="particles of the Monte Carlo filter")
+    beams: int = option(60, low=8, high=361, doc="beams of each scan the filter weighs")
+    start_sigma_m: float = option(
+        0.10, unit="m", low=0.0, high=5.0, doc="how well the mission's start position is known"
+    )
+    start_sigma_deg: float = option(
+        5.0, unit="deg", low=0.0, high=180.0, doc="how well the start heading is known"
+    )
+    global_start: bool = option(
+        False, doc="ignore the mission's start pose and localize globally on the whole map"
+    )
+    max_sigma_m: float = option(
+        0.05, unit="m", low=0.001, high=5.0, doc="views whose position is less sure go unfused"
+    )
+    max_sigma_deg: float = option(
+        2.0, unit="deg", low=0.01, high=180.0, doc="views whose heading is less sure go unfused"
+    )
+    seed: int = option(0, low=0, doc="seed of the filter's randomness")
+
+
+@dataclass(frozen=True)
 class SurveyConfig:
     source: str
     scene: Path
@@ -99,6 +129,8 @@ class SurveyConfig:
     cache: Path
     twin_time_scale: float = 1.0  # serial twins: simulated seconds per wall-clock second
     data: dict[str, Any] = field(default_factory=dict, repr=False)  # the TOML it was read from
+    localization: LocalizationOptions | None = None  # with a base whose pose_source is "laser"
+    map_file: Path | None = None  # the localization map's YAML (None: cut from the scene)
 
     @property
     def uses_sim_world(self) -> bool:
@@ -346,6 +378,7 @@ def parse_config(
     twins.finish()
     detector = _detector(root.table("detector", required=False))
     objects = _objects(root.table("objects"), folder)
+    localization, map_file = _localization(root, devices, folder)
     root.finish()
     return SurveyConfig(
         source,
@@ -360,6 +393,8 @@ def parse_config(
         cache,
         time_scale,
         data,
+        localization,
+        map_file,
     )
 
 
@@ -374,7 +409,9 @@ def _resolve(text: str, folder: Path, fallback: Path) -> Path:
 
 def _devices(robot: _Table) -> dict[str, DeviceConfig]:
     devices = {}
-    for role in DEVICE_ROLES:
+    for role in (*DEVICE_ROLES, *OPTIONAL_ROLES):
+        if role in OPTIONAL_ROLES and not robot.has(role):
+            continue
         table = robot.table(role)
         kind = table.string("type")
         try:
@@ -411,6 +448,47 @@ def _check_wiring(robot: _Table, devices: dict[str, DeviceConfig]) -> None:
             "port", f'give the serial port (e.g. /dev/ttyUSB0), or "{TWIN_PORT}" for its serial '
             'twin; or use wiring = "aux" on an ARCOS base'
         )  # fmt: skip
+
+
+def _localization(
+    root: _Table, devices: dict[str, DeviceConfig], folder: Path
+) -> tuple[LocalizationOptions | None, Path | None]:
+    """The ``[localization]`` table, checked against the base's ``pose_source``: a laser pose
+    needs a laser and a map; a table nothing uses is refused rather than silently ignored."""
+    base = devices["base"]
+    by_laser = base.option("pose_source") == "laser"
+    if not root.has("localization"):
+        if by_laser and "laser" not in devices:
+            raise root.fail("robot.base.pose_source", '"laser" needs a [robot.laser] device')
+        if not by_laser:
+            return None, None
+        options = LocalizationOptions()
+    else:
+        table = root.table("localization")
+        try:
+            options = parse_options(LocalizationOptions, table.data, "[localization]")
+        except OptionError as exc:
+            raise table.fail(exc.key, exc.problem) from None
+        table.used.update(table.data)
+        if not by_laser:
+            raise table._error(
+                "localization",
+                'is set but robot.base.pose_source is not "laser"; set it, or drop the table',
+            )
+    if "laser" not in devices:
+        raise root.fail("robot.base.pose_source", '"laser" needs a [robot.laser] device')
+    if options.map == "scene":
+        if devices["laser"].type != "sim" and base.type != "sim":
+            raise root.fail(
+                "localization.map",
+                '"scene" cuts the map from the twin\'s scene; on the robot give a map_server '
+                "YAML file (build one with 'twin map')",
+            )
+        return options, None
+    map_file = _resolve(options.map, folder, scenes_dir())
+    if not map_file.is_file():
+        raise root.fail("localization.map", f"no map file {map_file}; check the path")
+    return options, map_file
 
 
 def _mission(table: _Table) -> MissionConfig:

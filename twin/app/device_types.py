@@ -16,6 +16,7 @@ from typing import Literal
 from twin.core.options import option
 
 ROLES = ("camera", "pantilt", "base")
+OPTIONAL_ROLES = ("laser",)  # a robot may have one; localizing by laser needs it
 
 
 # -- the twin ----------------------------------------------------------------------------------
@@ -39,10 +40,36 @@ class SimPanTiltOptions:
 class SimBaseOptions:
     """The differential-drive base, driven by its wheels through the physics."""
 
-    pose_source: Literal["odometry", "truth"] = option(
+    pose_source: Literal["odometry", "laser", "truth"] = option(
         "odometry",
-        doc="what pose() reports: wheel odometry (as on the robot) or the ground truth",
+        doc="what a view's pose comes from: wheel odometry, the laser localized on the map "
+        "(needs [robot.laser] and [localization]), or the ground truth (the twin only)",
     )
+    wheel_radius_error: tuple[float, float] = option(
+        (0.0, 0.0),
+        low=-0.1,
+        high=0.1,
+        doc="[left, right]: how much larger each real wheel is than the odometry assumes "
+        "(0.003 = 0.3 %), the first of UMBmark's two dominant systematic errors",
+    )
+    track_error: float = option(
+        0.0, low=-0.2, high=0.2, doc="how much wider the real wheel track is than assumed"
+    )
+    slip_noise: float = option(
+        0.0,
+        unit="m",
+        low=0.0,
+        high=0.5,
+        doc="random wheel slip: each wheel's error after 1 m (1 sigma), growing as sqrt(distance)",
+    )
+    odometry_seed: int = option(0, low=0, doc="seed of the slip noise")
+
+
+@dataclass(frozen=True)
+class SimLaserOptions:
+    """The SICK LMS200 simulated by MuJoCo ray casting at 0.30 m on the base."""
+
+    beams: Literal[181, 361] = option(181, doc="beams over 180 degrees: 1 or 0.5 degree apart")
 
 
 # -- the real robot ----------------------------------------------------------------------------
@@ -79,6 +106,24 @@ class ArcosOptions:
 
     port: str = option(doc=SERIAL_PORT_DOC)
     baud: Literal[9600, 19200, 38400, 57600, 115200] = option(9600, doc="the HOST port's rate")
+    pose_source: Literal["odometry", "laser"] = option(
+        "odometry",
+        doc="what a view's pose comes from: the base's odometry, or the laser localized on the "
+        "map (needs [robot.laser] and [localization])",
+    )
+
+
+@dataclass(frozen=True)
+class LMS2xxOptions:
+    """A SICK LMS200/291 laser scanner over RS-232 (the Peoplebot's, at 0.30 m)."""
+
+    port: str = option(doc=SERIAL_PORT_DOC)
+    beams: Literal[181, 361] = option(181, doc="beams over 180 degrees: 1 or 0.5 degree apart")
+    mount: tuple[float, float, float, float] = option(
+        (0.15, 0.0, 0.30, 0.0),
+        doc="[x, y, z, yaw_deg] of the scanner on the base: metres forward, left, up, and its "
+        "zero beam's angle (the Peoplebot's LMS200 sits 0.15 m ahead of the centre, 0.30 m up)",
+    )
 
 
 @dataclass(frozen=True)
@@ -107,6 +152,10 @@ DEVICE_TYPES: dict[tuple[str, str], DeviceType] = {
                    "Canon VC-C4 over RS-232"),
         DeviceType("base", "arcos", ArcosOptions, "twin.app.factory:arcos_base",
                    "Peoplebot base over ARCOS"),
+        DeviceType("laser", "sim", SimLaserOptions, "twin.app.factory:sim_laser",
+                   "the SICK LMS200 simulated in the MuJoCo twin"),
+        DeviceType("laser", "lms2xx", LMS2xxOptions, "twin.app.factory:lms2xx_laser",
+                   "SICK LMS200/291 over RS-232"),
     )
 }  # fmt: skip
 

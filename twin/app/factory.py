@@ -20,14 +20,14 @@ from typing import TYPE_CHECKING, Any
 
 from twin.app.config import TWIN_PORT, DeviceConfig, SurveyConfig
 from twin.app.device_types import device_type
-from twin.core.devices import Device, Robot
+from twin.core.devices import Device, LaserMount, Robot
 from twin.core.geometry import CameraModel, Pose2D
 
 if TYPE_CHECKING:
     from twin.sim.robot import SimRobot
 
 # Devices are built base first: a VC-C4 on the base's AUX port needs the base's driver.
-BUILD_ORDER = ("base", "pantilt", "camera")
+BUILD_ORDER = ("base", "pantilt", "camera", "laser")
 
 
 @dataclass
@@ -40,6 +40,7 @@ class BuildContext:
     _sim: SimRobot | None = None
     _twins: Any = None
     _links: Any = None  # a temporary folder of stable links to the twins' pseudo-terminals
+    _sim_laser: Any = None
 
     @property
     def start(self) -> Pose2D:
@@ -68,12 +69,31 @@ class BuildContext:
 
             head = self.config.devices["pantilt"]
             wiring = head.options.wiring if head.type == "vcc4" else "direct"
+            laser = self.config.devices.get("laser")
+            source = None
+            if laser is not None and laser.option("port") == TWIN_PORT:
+                source = self.sim_laser.ranges_at  # the emulated scanner sees the MuJoCo room
             # Stable paths, so a driver can reopen its port after the twin's line is replaced.
             self._links = tempfile.TemporaryDirectory(prefix="twin-ports-")
             self._twins = SerialTwins(
-                self.sim, self.config.twin_time_scale, wiring, Path(self._links.name)
+                self.sim,
+                self.config.twin_time_scale,
+                wiring,
+                Path(self._links.name),
+                laser_source=source,
             )
         return self._twins
+
+    @property
+    def sim_laser(self):  # -> twin.sim.laser.SimLaser, made on first use
+        """The MuJoCo laser: the sim device, or what a serial twin of the scanner reads."""
+        if self._sim_laser is None:
+            from twin.sim.laser import LaserSpec, SimLaser
+
+            laser = self.config.devices.get("laser")
+            beams = laser.option("beams", 181) if laser is not None else 181
+            self._sim_laser = SimLaser(self.sim, LaserSpec(beams=beams))
+        return self._sim_laser
 
     def close(self) -> None:
         """Stop the serial twins, if any were started (the devices are closed by the Robot)."""
@@ -105,9 +125,16 @@ def sim_pantilt(device: DeviceConfig, context: BuildContext) -> Device:
 
 
 def sim_base(device: DeviceConfig, context: BuildContext) -> Device:
+    from twin.sim.drive import OdometryErrors
     from twin.sim.robot import SimBase
 
-    return SimBase(context.sim, device.options.pose_source)
+    o = device.options
+    context.sim.set_odometry_errors(
+        OdometryErrors(o.wheel_radius_error, o.track_error, o.slip_noise, o.odometry_seed)
+    )
+    # a laser-localized base drives on odometry; the localizer around it gives the pose
+    source = device.options.pose_source
+    return SimBase(context.sim, "odometry" if source == "laser" else source)
 
 
 def opencv_camera(device: DeviceConfig, context: BuildContext) -> Device:
@@ -140,6 +167,23 @@ def vcc4_pantilt(device: DeviceConfig, context: BuildContext) -> Device:
     return VCC4.open(_port(o.port, lambda: context.twins.vcc4_path), baudrate=o.baud)
 
 
+def sim_laser(device: DeviceConfig, context: BuildContext) -> Device:
+    return context.sim_laser
+
+
+def lms2xx_laser(device: DeviceConfig, context: BuildContext) -> Device:
+    from hardware.lms2xx import LMS2xx
+
+    o = device.options
+    x, y, z, yaw_deg = o.mount
+    if o.port == TWIN_PORT:  # the emulated scanner sits where the MuJoCo laser does
+        mount = context.sim_laser.mount
+    else:
+        mount = LaserMount(x, y, z, math.radians(yaw_deg))
+    port = _port(o.port, lambda: context.twins.lms2xx_path)
+    return LMS2xx.open(port, resolution=1.0 if o.beams == 181 else 0.5, mount=mount)
+
+
 def _port(port: str, twin_path: Callable[[], str | None]) -> str:
     """The serial port to open: the given path, or the serial twin's pty for ``"twin"``."""
     if port != TWIN_PORT:
@@ -162,10 +206,41 @@ def build_robot(
     context = context or BuildContext(config)
     try:
         for role in BUILD_ORDER:
+            if role not in config.devices:
+                continue
             device = config.devices[role]
             context.devices[role] = _factory(device)(device, context)
+        devices = context.devices
+        base, laser = devices["base"], devices.get("laser")
+        if config.localization is not None:
+            base = localized_base(config, context, base, laser)
     except BaseException:
         context.close()
         raise
-    devices = context.devices
-    return Robot(devices["camera"], devices["pantilt"], devices["base"]), context
+    return Robot(devices["camera"], devices["pantilt"], base, laser), context
+
+
+def localized_base(config: SurveyConfig, context: BuildContext, base, laser) -> Device:
+    """``base`` localized by ``laser`` on the config's map (a map_server file, or the scene
+    cut at the laser's height in the twin), starting around the mission's start pose."""
+    from twin.app.localization import LaserLocalizedBase, LocalizerSettings
+
+    o = config.localization
+    assert o is not None and laser is not None  # the config checked both
+    from twin.nav.maps import OccupancyMap, load_map
+
+    if config.map_file is not None:
+        occupancy = load_map(config.map_file)
+    else:
+        from twin.sim.scene_map import scene_map
+
+        cut = scene_map(context.sim.world, laser.mount.z, o.resolution)
+        occupancy = OccupancyMap(cut.occupancy, cut.resolution, cut.origin)
+    settings = LocalizerSettings(
+        particles=o.particles,
+        beams=o.beams,
+        start_sigma=(o.start_sigma_m, o.start_sigma_m, math.radians(o.start_sigma_deg)),
+        seed=o.seed,
+    )
+    start = None if o.global_start else context.start
+    return LaserLocalizedBase(base, laser, occupancy, settings, start)

@@ -22,11 +22,11 @@ from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Protocol
+from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 
-from twin.app.record import NullRecorder, Recorder, ViewRecord
+from twin.app.record import Localization, NullRecorder, Recorder, ViewRecord
 from twin.core.devices import Robot
 from twin.core.errors import TwinError
 from twin.core.geometry import Pose2D
@@ -53,6 +53,13 @@ class PatchDetector(Protocol):
     def patch_boxes(self, shape: tuple[int, ...]) -> np.ndarray: ...
 
     def column_spans(self, width: int) -> np.ndarray: ...
+
+
+@runtime_checkable
+class LocalizingBase(Protocol):
+    """A base that localizes itself (``twin.app.localization``): what it saw is recorded."""
+
+    def snapshot(self) -> Localization: ...
 
 
 class ViewTarget(Protocol):
@@ -290,6 +297,8 @@ class Mission:
             tuple((x, y, yaw) for x, y, yaw in state.path),
             truth_pose,
             refusal,
+            robot.base.snapshot() if isinstance(robot.base, LocalizingBase) else None,
+            tuple((x, y, yaw) for x, y, yaw in state.truth_path),
         )
         with self._timed("record"):
             self.recorder.log_view(record, self.grid)

@@ -14,11 +14,12 @@ checkpoint, with ``"status"`` saying why it stopped, and can be resumed; a finis
 from __future__ import annotations
 
 import json
+import math
 import sys
 import time
 import uuid
 from collections.abc import Callable
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from datetime import datetime
 from pathlib import Path
 from typing import Any
@@ -26,7 +27,7 @@ from typing import Any
 import numpy as np
 
 from twin.app.config import RERUN_MODES, SurveyConfig, dump_toml, load_config, resolve_config
-from twin.app.mission import Checkpoint, Mission, MissionState
+from twin.app.mission import Checkpoint, Mission, MissionState, PoseGate
 from twin.app.outputs import check_output_folder, make_output_folder, removed_on_false_start
 from twin.app.plots import grid_figure
 from twin.app.record import NullRecorder, Recorder, RerunRecorder, SceneInfo
@@ -231,6 +232,11 @@ def _fly(config, robot, context, run, resume, started, quiet, on_result) -> dict
         grid, state = loaded
     plan = plan_views(config.mission, robot.pantilt.limits)
     recorder = _recorder(out, options, resume, say)
+    gate = None
+    if config.localization is not None:
+        o = config.localization
+        gate = PoseGate(o.max_sigma_m, math.radians(o.max_sigma_deg))
+        scene = replace(scene, occupancy=robot.base.map)
     mission = Mission(
         robot,
         detector,
@@ -241,6 +247,8 @@ def _fly(config, robot, context, run, resume, started, quiet, on_result) -> dict
         max_range=config.grid.max_range,
         truth=truth,
         truth_pose=sim.truth_pose if sim is not None else None,
+        pose_gate=gate,
+        say=say,
     )
     setup_time = time.perf_counter() - setup_started
     n_stops = len(config.mission.stops)

@@ -25,11 +25,11 @@ def describe() -> str:
     import dataclasses
     import json
 
-    from twin.app.device_types import DEVICE_TYPES, ROLES
+    from twin.app.device_types import DEVICE_TYPES, OPTIONAL_ROLES, ROLES
     from twin.core.options import describe_options
 
     lines = []
-    for role in ROLES:
+    for role in (*ROLES, *OPTIONAL_ROLES):
         for (r, name), declared in sorted(DEVICE_TYPES.items()):
             if r != role:
                 continue
