@@ -25,6 +25,8 @@ def room(extra_box: tuple[float, float, float, float] | None = None) -> Occupanc
     grid[:2, :] = grid[-2:, :] = grid[:, :2] = grid[:, -2:] = 1.0
     grid[70:90, 10:40] = 1.0  # a block in the upper left
     grid[30:36, 60:66] = 1.0  # a small blob mid-room
+    grid[2:20, 104:108] = 1.0  # a short wall jutting from the bottom wall on the right
+    grid[60:64, 104:118] = 1.0  # a shelf along the right wall
     if extra_box is not None:
         x0, y0, x1, y1 = (round(v / RES) for v in extra_box)
         grid[y0:y1, x0:x1] = 1.0
@@ -185,3 +187,19 @@ def test_a_global_start_finds_the_robot_without_being_told_where_it_is():
     wrapped, base = localized(start=None)
     metres, degrees = pose_error(wrapped.pose(), base.truth)
     assert metres < 0.05 and degrees < 2.0
+
+
+def test_a_kidnapped_robot_is_found_again():
+    """Carried 1.5 m and turned while its odometry saw nothing: the next scans disagree with
+    the map, the filter injects random particles and finds the robot again."""
+    wrapped, base = localized()
+    wrapped.go_to(GOALS[0])
+    base.truth = Pose2D(2.0, 3.0, -math.pi / 2)  # kidnapped: odometry unchanged
+    for _ in range(40):
+        estimate = wrapped._update()
+        metres, degrees = pose_error(estimate.pose, base.truth)
+        if metres < 0.05 and degrees < 2.0 and estimate.localized:
+            break
+    assert metres < 0.05 and degrees < 2.0
+    reached = wrapped.go_to(GOALS[1])
+    assert pose_error(reached, base.truth)[0] < 0.03
