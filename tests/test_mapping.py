@@ -14,6 +14,7 @@ import pytest
 from twin.core.devices import LaserMount, Scan
 from twin.core.errors import InputError
 from twin.core.geometry import Pose2D
+from twin.nav.distance import distance_transform
 from twin.nav.mapping import (
     MapAgreement,
     MapBuilder,
@@ -29,11 +30,7 @@ from twin.nav.raycast import (
     scan_points_in_base,
     simulate_scan,
 )
-from twin.nav.scan_matching import (
-    CorrelativeScanMatcher,
-    LikelihoodTable,
-    distance_field,
-)
+from twin.nav.scan_matching import CorrelativeScanMatcher, LikelihoodTable
 
 MOUNT = LaserMount(x=0.1, y=0.0, z=0.30, yaw=0.0)
 FINE = 0.01
@@ -242,20 +239,10 @@ def test_mapping_at_the_true_poses_reproduces_the_room(world, loop_scans):
 
 def near(occupancy_map, cells):
     """Cells within ``cells`` cells of an occupied one."""
-    return np.sqrt(distance_field(occupancy_map.occupied)) <= cells
+    return distance_transform(occupancy_map.occupied) <= cells
 
 
 # -- scan matching --------------------------------------------------------------------------------
-
-
-def test_distance_field_is_the_exact_euclidean_distance():
-    rng = np.random.default_rng(2)
-    mask = rng.uniform(size=(23, 31)) < 0.03
-    rows, cols = np.nonzero(mask)
-    yy, xx = np.mgrid[0:23, 0:31]
-    brute = ((yy[..., None] - rows) ** 2 + (xx[..., None] - cols) ** 2).min(axis=-1)
-    np.testing.assert_array_equal(distance_field(mask), brute)
-    assert distance_field(np.zeros((3, 4), dtype=bool)).min() >= 1e12
 
 
 def test_the_coarse_table_bounds_every_fine_cell_of_its_block(world):
@@ -268,6 +255,18 @@ def test_the_coarse_table_bounds_every_fine_cell_of_its_block(world):
         block = padded[a + 1 : a + 1 + d, b + 1 : b + 1 + d]
         assert table.coarse[a, b] == block.max()
     assert table.fine.max() == 0.0 and table.fine.min() == table.floor == -4.5
+
+
+def test_without_known_points_the_surface_is_anywhere_in_its_cell():
+    table = LikelihoodTable(walled(), sigma_m=0.05)  # the wall: column 0, faces at x = 0.05
+    # inside the wall cell 0, then (half a cell, 1.5 cells) from its square: -d² / (2 sigma²)
+    np.testing.assert_allclose(table.fine[20, :4], [0.0, -0.125, -1.125, -3.125])
+    assert table.surface[20, 0] and not table.surface[20, 1]
+    # a thick wall scores by its outline: deep inside it is as bad as far from it
+    thick = np.zeros((40, 60))
+    thick[:, :10] = 1.0
+    inside = LikelihoodTable(OccupancyMap(thick, 0.05)).fine[20]
+    assert inside[9] == 0.0 and inside[5] == inside[15] == -4.5
 
 
 @pytest.mark.parametrize(

@@ -25,14 +25,10 @@ from numba import njit
 from twin.core.devices import LaserMount, Scan
 from twin.core.errors import InputError
 from twin.core.geometry import Pose2D
+from twin.nav.distance import distance_transform
 from twin.nav.maps import UNKNOWN, OccupancyMap
 from twin.nav.raycast import clip_to_grid, first_boundary, laser_pose
-from twin.nav.scan_matching import (
-    CorrelativeScanMatcher,
-    LikelihoodTable,
-    MatchResult,
-    distance_field,
-)
+from twin.nav.scan_matching import CorrelativeScanMatcher, LikelihoodTable, MatchResult
 
 
 def _log_odds(p: float) -> float:
@@ -351,7 +347,7 @@ def map_agreement(
 def _distance_at(occupancy_map: OccupancyMap, x: np.ndarray, y: np.ndarray) -> np.ndarray:
     """Distance (m) from the cells holding points (x, y) to the nearest occupied cell of the
     map, centre to centre; infinite off the map."""
-    field = np.sqrt(distance_field(occupancy_map.occupied)) * occupancy_map.resolution
+    field = distance_transform(occupancy_map.occupied, occupancy_map.resolution)
     row, col = occupancy_map.cell_of(x, y)
     ny, nx = occupancy_map.shape
     inside = (row >= 0) & (row < ny) & (col >= 0) & (col < nx)

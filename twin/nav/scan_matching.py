@@ -2,11 +2,14 @@
 
 Where is the base, given a scan, a map, and a rough prior (odometry)? The map is rasterised once
 into a lookup table of the log-likelihood of a laser return falling in each cell: the log of a
-Gaussian of the distance to the nearest occupied cell, blurred by the sensor's uncertainty
-``sigma_m`` and floored at ``max_distance_m`` so one stray return cannot veto a pose (Olson's
-table; a Euclidean distance transform computes it exactly). A pose's score is the sum of the
-table over the scan's returns placed at that pose (independent beams). The search is exhaustive
-over a window around the prior: x and y in steps of the table's cells, yaw in ``yaw_step``.
+Gaussian of the distance to the nearest surface, blurred by the sensor's uncertainty ``sigma_m``
+and floored at ``max_distance_m`` so one stray return cannot veto a pose (Olson's table). The
+surface is the outline of the occupied cells (a return deep inside a solid cross-section fits no
+better than one in free space): anywhere within an outline cell, or at the mean of the returns
+that fell in it when the map's builder kept those (``LikelihoodTable``). A pose's score is the
+sum of the table over the scan's returns placed at that pose (independent beams). The search is
+exhaustive over a window around the prior: x and y in steps of the table's cells, yaw in
+``yaw_step``.
 
 Multi-resolution makes it fast, as in the paper: a coarse table holds, in each cell, the maximum
 of the fine table over the block of D x D cells that starts there, so a pose's coarse score bounds
@@ -21,6 +24,11 @@ the peak's) are not scored; the search keeps going until the bound falls below t
 every voxel that matters is in the sum. The voxels' own size adds step²/12 to each variance.
 An optional Gaussian prior on the offset from the odometry pose (``prior_sigma``) is added to
 every score (the paper's motion model term), bounded per block likewise.
+
+Beyond the paper, the best voxel is refined below the lattice (``refine``): a pattern search
+from it, within one voxel, on the same likelihood evaluated at the returns' exact positions
+instead of their cells. Cells of 5 cm otherwise limit a match to a few centimetres, and a map
+built from such matches drifts by that much per scan.
 """
 
 from __future__ import annotations
@@ -36,61 +44,6 @@ from twin.core.errors import InputError
 from twin.core.geometry import Pose2D
 from twin.nav.maps import OccupancyMap
 from twin.nav.raycast import scan_points_in_base
-
-_FAR = 1e12  # "no occupied cell" in the squared distance transform (cells²)
-
-
-def distance_field(mask: np.ndarray) -> np.ndarray:
-    """Squared Euclidean distance (in cells²) from every cell to the nearest ``True`` cell of
-    ``mask`` (Felzenszwalb and Huttenlocher's linear-time transform); ~1e12 if there is none."""
-    grid = np.where(np.asarray(mask, dtype=bool), 0.0, _FAR)
-    _edt_2d(grid)
-    return grid
-
-
-@njit(cache=True)
-def _edt_1d(f, out, v, z):
-    n = f.shape[0]
-    k = 0
-    v[0] = 0
-    z[0] = -np.inf
-    z[1] = np.inf
-    for q in range(1, n):
-        s = ((f[q] + q * q) - (f[v[k]] + v[k] * v[k])) / (2.0 * q - 2.0 * v[k])
-        while s <= z[k]:
-            k -= 1
-            s = ((f[q] + q * q) - (f[v[k]] + v[k] * v[k])) / (2.0 * q - 2.0 * v[k])
-        k += 1
-        v[k] = q
-        z[k] = s
-        z[k + 1] = np.inf
-    k = 0
-    for q in range(n):
-        while z[k + 1] < q:
-            k += 1
-        out[q] = (q - v[k]) * (q - v[k]) + f[v[k]]
-
-
-@njit(cache=True)
-def _edt_2d(grid):
-    ny, nx = grid.shape
-    n = max(ny, nx)
-    v = np.zeros(n, dtype=np.int64)
-    z = np.zeros(n + 1)
-    f = np.zeros(n)
-    out = np.zeros(n)
-    for c in range(nx):
-        for r in range(ny):
-            f[r] = grid[r, c]
-        _edt_1d(f[:ny], out[:ny], v, z)
-        for r in range(ny):
-            grid[r, c] = out[r]
-    for r in range(ny):
-        for c in range(nx):
-            f[c] = grid[r, c]
-        _edt_1d(f[:nx], out[:nx], v, z)
-        for c in range(nx):
-            grid[r, c] = min(out[c], _FAR)
 
 
 def surface_cells(occupied: np.ndarray) -> np.ndarray:
@@ -112,14 +65,15 @@ def surface_cells(occupied: np.ndarray) -> np.ndarray:
 class LikelihoodTable:
     """Olson's lookup table of a map: per cell, the log-likelihood of a return there.
 
-    Each occupied cell on an obstacle's outline (``surface_cells``) stands for one point of
-    the surface: its centre, or where the returns in it fell on average when the map's builder
-    knows (``surface_points``, (ny, nx, 2) metres, NaN where unknown), which keeps what the
-    laser saw finer than the cells. ``fine[row, col]`` = -min(d, ``max_distance_m``)² /
-    (2 ``sigma_m``²) with d the distance (m) from the cell's centre to the nearest such point;
-    ``floor`` is its least value (also used off the map); ``coarse`` holds block maxima of
-    ``coarse_cells`` x ``coarse_cells`` fine cells (see the module's docstring), offset by
-    ``coarse_cells - 1``; ``anchors`` (ny, nx, 2) the surface points (NaN elsewhere).
+    The surface is in the occupied cells on an obstacle's outline (``surface_cells``):
+    somewhere in the cell, as far as the map knows (a point in such a cell is at distance 0),
+    or exactly where the returns in it fell on average when the map's builder knows that
+    (``surface_points``, (ny, nx, 2) metres, NaN where unknown), which keeps what the laser saw
+    finer than the cells. ``fine[row, col]`` = -min(d, ``max_distance_m``)² / (2 ``sigma_m``²)
+    with d the distance (m) from the cell's centre to the nearest surface; ``floor`` is its
+    least value (also used off the map); ``coarse`` holds block maxima of ``coarse_cells`` x
+    ``coarse_cells`` fine cells (see the module's docstring), offset by ``coarse_cells - 1``.
+    ``surface`` (ny, nx) marks the outline cells, ``anchors`` (ny, nx, 2) their known points.
     """
 
     def __init__(
@@ -143,44 +97,55 @@ class LikelihoodTable:
         self.sigma_m = float(sigma_m)
         self.coarse_cells = coarse_cells
         self.floor = -(max_distance_m**2) / (2.0 * sigma_m**2)
-        surface = surface_cells(occupancy_map.occupied)
+        self.surface = surface_cells(occupancy_map.occupied)
         anchors = np.full((*occupancy_map.shape, 2), np.nan)
-        rows, cols = np.nonzero(surface)
-        anchors[rows, cols, 0], anchors[rows, cols, 1] = occupancy_map.center_of(rows, cols)
         if surface_points is not None:
             points = np.asarray(surface_points, dtype=float)
             if points.shape != anchors.shape:
                 raise InputError(
                     f"surface_points must be (ny, nx, 2) = {anchors.shape}, got {points.shape}"
                 )
-            known = surface & np.isfinite(points).all(axis=2)
+            known = self.surface & np.isfinite(points).all(axis=2)
             anchors[known] = points[known]
         self.anchors = anchors
         reach = math.ceil(max_distance_m / res) + 1
-        self.fine = _anchor_table(
-            anchors, *self.origin, res, 1.0 / (2.0 * sigma_m**2), self.floor, reach
+        self.fine = _surface_table(
+            self.surface, anchors, *self.origin, res, 1.0 / (2.0 * sigma_m**2), self.floor, reach
         )
         self.coarse = _block_max(self.fine, coarse_cells)
 
 
+@njit(cache=True, inline="always")
+def _surface_distance2(px, py, row, col, surface, anchors, x0, y0, res):
+    """Squared distance (m²) from (px, py) to the surface in cell (row, col): to its known
+    point, else to the cell's square; infinite if the cell holds no surface."""
+    if not surface[row, col]:
+        return np.inf
+    ax = anchors[row, col, 0]
+    if np.isfinite(ax):
+        dx, dy = px - ax, py - anchors[row, col, 1]
+        return dx * dx + dy * dy
+    dx = max(abs(px - (x0 + (col + 0.5) * res)) - 0.5 * res, 0.0)
+    dy = max(abs(py - (y0 + (row + 0.5) * res)) - 0.5 * res, 0.0)
+    return dx * dx + dy * dy
+
+
 @njit(cache=True)
-def _anchor_table(anchors, x0, y0, res, inv_two_var, floor, reach):
-    """Per cell: the best log-likelihood -d² / (2 sigma²) over the surface points within
-    ``reach`` cells, at least ``floor``."""
-    ny, nx = anchors.shape[0], anchors.shape[1]
+def _surface_table(surface, anchors, x0, y0, res, inv_two_var, floor, reach):
+    """Per cell: -d² / (2 sigma²) at its centre for the nearest surface within ``reach`` cells,
+    at least ``floor``."""
+    ny, nx = surface.shape
     table = np.full((ny, nx), floor)
     for r in range(ny):
         for c in range(nx):
-            ax, ay = anchors[r, c, 0], anchors[r, c, 1]
-            if not np.isfinite(ax):
+            if not surface[r, c]:
                 continue
             for rr in range(max(r - reach, 0), min(r + reach + 1, ny)):
-                dy = y0 + (rr + 0.5) * res - ay
+                cy = y0 + (rr + 0.5) * res
                 for cc in range(max(c - reach, 0), min(c + reach + 1, nx)):
-                    dx = x0 + (cc + 0.5) * res - ax
-                    value = -(dx * dx + dy * dy) * inv_two_var
-                    if value > table[rr, cc]:
-                        table[rr, cc] = value
+                    cx = x0 + (cc + 0.5) * res
+                    d2 = _surface_distance2(cx, cy, r, c, surface, anchors, x0, y0, res)
+                    table[rr, cc] = max(table[rr, cc], -d2 * inv_two_var)
     return table
 
 
@@ -310,6 +275,7 @@ class CorrelativeScanMatcher:
         x, y, yaw = prior.x + i * res, prior.y + j * res, prior.yaw + float(yaw_offsets[k])
         if self.refine:
             x, y, yaw = _refine(
+                table.surface,
                 table.anchors,
                 points,
                 np.array([x, y, yaw]),
@@ -422,11 +388,11 @@ def _search(fine, coarse, floor, d, cells, half, yaw_offsets, res, w_xy, w_yaw, 
 
 
 @njit(cache=True)
-def _anchor_score(anchors, points, x, y, yaw, x0, y0, res, inv_two_var, reach):
+def _surface_score(surface, anchors, points, x, y, yaw, x0, y0, res, inv_two_var, reach):
     """The score of a continuous pose: each return scores -d² / (2 sigma²) for the distance d
-    to the nearest surface point within ``reach`` cells of it (at least that of ``reach``
-    cells), so the refinement sees where within their cells the surfaces are."""
-    ny, nx = anchors.shape[0], anchors.shape[1]
+    to the nearest surface within ``reach`` cells of it (at least that of ``reach`` cells), so
+    the refinement sees where within their cells the surfaces are."""
+    ny, nx = surface.shape
     c, s = math.cos(yaw), math.sin(yaw)
     limit = (reach * res) ** 2
     total = 0.0
@@ -437,17 +403,17 @@ def _anchor_score(anchors, points, x, y, yaw, x0, y0, res, inv_two_var, reach):
         best = limit
         for rr in range(max(row - reach, 0), min(row + reach + 1, ny)):
             for cc in range(max(col - reach, 0), min(col + reach + 1, nx)):
-                ax = anchors[rr, cc, 0]
-                if np.isfinite(ax):
-                    dx, dy = px - ax, py - anchors[rr, cc, 1]
-                    best = min(best, dx * dx + dy * dy)
+                d2 = _surface_distance2(px, py, rr, cc, surface, anchors, x0, y0, res)
+                best = min(best, d2)
         total -= best * inv_two_var
     return total
 
 
 @njit(cache=True)
-def _refine(anchors, points, start, prior, x0, y0, res, yaw_step, inv_two_var, w_xy, w_yaw):
-    """Sub-voxel pose: a pattern search on ``_anchor_score`` from the best voxel, moving by half
+def _refine(
+    surface, anchors, points, start, prior, x0, y0, res, yaw_step, inv_two_var, w_xy, w_yaw
+):
+    """Sub-voxel pose: a pattern search on ``_surface_score`` from the best voxel, moving by half
     a voxel, then a quarter, ... down to 1/64, and never beyond one voxel from it."""
     pose = start.copy()
     steps = np.array([res, res, yaw_step])
@@ -455,7 +421,9 @@ def _refine(anchors, points, start, prior, x0, y0, res, yaw_step, inv_two_var, w
     def objective(q):
         d = q - prior
         penalty = 0.5 * (w_xy * (d[0] * d[0] + d[1] * d[1]) + w_yaw * d[2] * d[2])
-        score = _anchor_score(anchors, points, q[0], q[1], q[2], x0, y0, res, inv_two_var, 2)
+        score = _surface_score(
+            surface, anchors, points, q[0], q[1], q[2], x0, y0, res, inv_two_var, 2
+        )
         return score - penalty
 
     best = objective(pose)
