@@ -371,7 +371,7 @@ def test_the_builder_corrects_odometry_drift_and_maps_the_room(world, loop_scans
     truth, scans = loop_scans
     odometry = wheel_odometry(truth, right_scale=1.01)  # a 1 % wheel error
     odometry_error = max(o.distance_to(t) for o, t in zip(odometry, truth, strict=True))
-    builder = MapBuilder((-0.5, -0.5, 5.0, 6.5), 0.05, matcher=CorrelativeScanMatcher(mount=MOUNT))
+    builder = MapBuilder((-0.5, -0.5, 5.0, 6.5), 0.05, mount=MOUNT)
     for pose, scan in zip(odometry, scans, strict=True):
         builder.add(pose, scan)
     errors = [c.distance_to(t) for c, t in zip(builder.trajectory, truth, strict=True)]
@@ -399,3 +399,6 @@ def test_bad_mapper_arguments_are_refused():
         OccupancyGridMapper((0.0, 0.0, 1.0, 1.0), p_hit=0.4)
     with pytest.raises(InputError, match="yaw_step"):
         CorrelativeScanMatcher(yaw_step=0.0)
+    with pytest.raises(InputError, match="mount"):
+        MapBuilder((0.0, 0.0, 1.0, 1.0), mount=MOUNT, matcher=CorrelativeScanMatcher())
+    assert MapBuilder((0.0, 0.0, 1.0, 1.0), mount=MOUNT).mapper.mount == MOUNT

@@ -228,10 +228,10 @@ class MapBuilder:
     The first scan is integrated at its odometry pose, which fixes the map frame. For each later
     one, the odometry increment since the previous scan is applied to the previous *corrected*
     pose; the scan is matched against the map built so far in a window around that prediction
-    (``matcher``; its ``mount`` is the laser's); the scan is then integrated at the matched pose.
-    A scan with fewer than ``min_points`` returns is integrated at the prediction unmatched.
-    ``extent`` (metres) bounds the map, as ``OccupancyGridMapper``'s; ``sigma_m`` blurs the
-    matcher's table of the map built so far.
+    (``matcher``, by default a ``CorrelativeScanMatcher`` for the laser on ``mount``); the scan
+    is then integrated at the matched pose. A scan with fewer than ``min_points`` returns is
+    integrated at the prediction unmatched. ``extent`` (metres) bounds the map, as
+    ``OccupancyGridMapper``'s; ``sigma_m`` blurs the matcher's table of the map built so far.
     """
 
     def __init__(
@@ -239,13 +239,20 @@ class MapBuilder:
         extent: tuple[float, float, float, float],
         resolution: float = 0.05,
         *,
+        mount: LaserMount | None = None,
         matcher: CorrelativeScanMatcher | None = None,
         sigma_m: float = 0.05,
         coarse_cells: int = 4,
         min_points: int = 20,
         no_return_free_m: float = 3.0,
     ) -> None:
-        self.matcher = matcher or CorrelativeScanMatcher()
+        if matcher is None:
+            matcher = CorrelativeScanMatcher(mount=mount)
+        elif mount is not None and mount != matcher.mount:
+            raise InputError(
+                f"the laser mount {mount} differs from the matcher's {matcher.mount}; give one"
+            )
+        self.matcher = matcher
         self.mapper = OccupancyGridMapper(
             extent, resolution, mount=self.matcher.mount, no_return_free_m=no_return_free_m
         )

@@ -22,7 +22,7 @@ from numba import njit
 from twin.core.devices import LaserMount, Scan
 from twin.core.errors import InputError
 from twin.core.geometry import Pose2D
-from twin.nav.maps import OccupancyMap
+from twin.nav.maps import UNKNOWN, OccupancyMap
 
 LMS200_MAX_RANGE = 8.0  # metres, the Peoplebot's SICK LMS200 in its 8 m mode
 
@@ -65,7 +65,7 @@ def raycast(
         raise InputError(f"max_range must be a positive number of metres, got {max_range!r}")
     blocked = occupancy_map.occupied
     if block_unknown:
-        blocked = blocked | (occupancy_map.occupancy == -1.0)
+        blocked = blocked | (occupancy_map.occupancy == UNKNOWN)
     bearings = np.asarray(angles, dtype=float) + sensor.yaw
     out = np.empty(bearings.shape[0])
     x0, y0, _ = occupancy_map.origin
