@@ -398,8 +398,8 @@ def test_a_kidnapped_robot_is_found_again():
     found = next(
         k for k, e in enumerate(estimates) if e.localized and error_of(e.pose, carried_to)[0] < 0.03
     )
-    assert found < 80
-    for e in estimates[found:]:
+    assert found < 40
+    for e in estimates[found + 10 :]:  # a second to settle, then it stays
         assert error_of(e.pose, carried_to)[0] < 0.03
     assert estimates[-1].injected == 0
 

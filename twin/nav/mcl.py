@@ -30,8 +30,10 @@ The textbook filter (Thrun, Burgard & Fox, *Probabilistic Robotics*, ch. 5, 6 an
   look-alike place it took augmented MCL minutes to leave.
 * **Recovery**: augmented MCL (Table 8.3): short- and long-term averages ``w_fast`` / ``w_slow``
   of the measurement likelihood; each resampling replaces a fraction ``max(0, 1 - w_fast /
-  w_slow)`` of the particles by poses drawn uniformly over the free cells. The likelihood they
-  average is the per-beam geometric mean, so the number of beams a scan kept does not move it.
+  w_slow)`` of the particles by random poses. The likelihood they average is the per-beam
+  geometric mean, so the number of beams a scan kept does not move it. The random poses are
+  picked by the latest scan from ``recovery_pool`` uniform candidates each (sensor resetting):
+  on a 10 x 8 m map uniform poses alone often re-locked the filter onto a look-alike place.
 * **Estimate**: weighted mean, circular mean for yaw, the 3 × 3 weighted covariance, the effective
   sample size, the weight within ``cluster_radius`` / ``cluster_angle`` of the mean (about 1 for
   one mode; two modes put the mean between them and this mass drops), and the scan fit: the
@@ -85,6 +87,7 @@ class MclConfig:
     max_particles: int = 5000
     # the first scan after init_global weighs this many uniform poses (0: max_particles only)
     global_samples: int = 50000
+    recovery_pool: int = 20  # uniform candidates per random particle, picked by the scan
     kld_epsilon: float = 0.05
     kld_z: float = 2.326  # upper 1 - delta quantile of the normal, delta = 0.01
     kld_bin_xy: float = 0.25  # m
@@ -133,6 +136,8 @@ class MclConfig:
         ):
             if int(value) != value or value < 0:
                 raise InputError(f"MCL {name} must be a whole number, got {value!r}")
+        if int(self.recovery_pool) != self.recovery_pool or self.recovery_pool < 1:
+            raise InputError(f"MCL recovery_pool must be 1 or more, got {self.recovery_pool!r}")
         if len(self.alphas) != 4 or not all(math.isfinite(a) and a >= 0 for a in self.alphas):
             raise InputError(f"MCL alphas must be four non-negative numbers, got {self.alphas!r}")
         for name, value in (
@@ -435,6 +440,7 @@ class MonteCarloLocalizer:
         self._estimate: PoseEstimate | None = None
         self._scan_fit: float | None = None
         self._global_pending = False
+        self._beams: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
         if initial_pose is None:
             self.init_global()
         else:
@@ -608,19 +614,8 @@ class MonteCarloLocalizer:
         a = angles[index] + self.mount.yaw
         beam_x = np.ascontiguousarray(self.mount.x + r * np.cos(a))
         beam_y = np.ascontiguousarray(self.mount.y + r * np.sin(a))
-        loglik = np.empty(len(self._poses))
-        log_likelihoods(
-            self._poses,
-            beam_x,
-            beam_y,
-            self._surface,
-            self.map.origin[0],
-            self.map.origin[1],
-            1.0 / self.map.resolution,
-            self._lut(float(scan.max_range)),
-            1.0 / _LUT_STEP,
-            loglik,
-        )
+        self._beams = (beam_x, beam_y, self._lut(float(scan.max_range)))
+        loglik = self._log_likelihoods(self._poses)
         # augmented MCL: the belief's predicted likelihood of the scan, per beam
         log_avg = _logsumexp(self._log_w + loglik / index.size)
         self._monitor.update(log_avg, self.config.alpha_slow, self.config.alpha_fast)
@@ -628,12 +623,37 @@ class MonteCarloLocalizer:
         self._log_w = log_w - _logsumexp(log_w)
         return beam_x, beam_y
 
+    def _log_likelihoods(self, poses: np.ndarray) -> np.ndarray:
+        """log p(last weighed scan | pose) for each of the poses (n, 3)."""
+        assert self._beams is not None
+        beam_x, beam_y, lut = self._beams
+        out = np.empty(len(poses))
+        log_likelihoods(
+            poses,
+            beam_x,
+            beam_y,
+            self._surface,
+            self.map.origin[0],
+            self.map.origin[1],
+            1.0 / self.map.resolution,
+            lut,
+            1.0 / _LUT_STEP,
+            out,
+        )
+        return out
+
     def _ess(self) -> float:
         return float(1.0 / np.sum(np.exp(2.0 * self._log_w)))
 
     def _resample(self) -> int:
         """Low-variance resampling to the KLD count, a fraction of it replaced by random poses
-        (augmented MCL); returns how many were random."""
+        (augmented MCL); returns how many were random.
+
+        The random poses are drawn as sensor resetting does (Lenser & Veloso 2000; the dual
+        proposal of Mixture MCL, 8.3.5): ``recovery_pool`` uniform candidates per pose, of which
+        the latest scan's likelihood picks (low-variance again). Uniform poses alone rarely land
+        within the likelihood's 20 cm basin of a kidnapped robot on a large map, and the filter
+        re-locked onto a look-alike place instead."""
         weights = np.exp(self._log_w)
         count = self._kld_count(weights)
         fraction = self._monitor.inject_fraction if self._spawn_cells.size else 0.0
@@ -645,7 +665,13 @@ class MonteCarloLocalizer:
             index = low_variance_indices(weights, kept, float(self.rng.random()))
             parts.append(self._poses[index])
         if injected:
-            parts.append(self._random_poses(injected))
+            pool = self._random_poses(injected * self.config.recovery_pool)
+            if len(pool) > injected:
+                loglik = self._log_likelihoods(pool)
+                chance = np.exp(loglik - loglik.max())
+                pick = low_variance_indices(chance / chance.sum(), injected, self.rng.random())
+                pool = pool[pick]
+            parts.append(pool)
         self._poses = np.ascontiguousarray(np.concatenate(parts))
         self._log_w = np.full(count, -math.log(count))
         return injected
