@@ -152,10 +152,20 @@ def lms2xx_on_its_emulator(tmp_path) -> Iterator[LaserUnderTest]:
         yield LaserUnderTest(laser, clock.now, math.pi)
 
 
+@contextlib.contextmanager
+def sim_laser(tmp_path) -> Iterator[LaserUnderTest]:
+    """The MuJoCo laser on the Peoplebot in the living room, on simulated time."""
+    from twin.sim import make_sim_robot
+    from twin.sim.laser import LaserSpec, SimLaser
+
+    sim, _ = make_sim_robot("living_room", start=Pose2D(2.5, 3.3, 0.0))
+    yield LaserUnderTest(SimLaser(sim, LaserSpec()), lambda: sim.world.time, math.pi)
+
+
 CAMERAS = {"sim": sim_camera, "opencv": opencv_camera}
 PANTILTS = {"sim": sim_pantilt, "vcc4": vcc4_on_its_line, "vcc4-aux": vcc4_on_the_aux_port}
 BASES = {"sim": sim_base, "arcos": arcos_base}
-LASERS = {"lms2xx": lms2xx_on_its_emulator}
+LASERS = {"lms2xx": lms2xx_on_its_emulator, "sim": sim_laser}
 
 
 @pytest.fixture(params=sorted(CAMERAS))
