@@ -13,11 +13,10 @@ from twin.core.devices import LaserMount, Scan
 from twin.core.errors import InputError
 from twin.core.geometry import Pose2D
 from twin.nav.mapping import MapBuilder, map_agreement, wheel_odometry
-from twin.nav.maps import OccupancyMap, load_map, save_map
+from twin.nav.maps import load_map, save_map
 from twin.nav.raycast import laser_pose, lms200_angles, raycast
 from twin.nav.scan_matching import CorrelativeScanMatcher
-from twin.sim.scene_map import SceneCut
-from twin.sim.scene_map import scene_map as scene_cut
+from twin.sim.scene_map import scene_map
 from twin.sim.world import World
 
 sys.path.insert(0, str(Path(__file__).parent))
@@ -50,13 +49,6 @@ SHAPES = """
 </mujoco>
 """
 HEIGHT = 0.3
-
-
-def scene_map(world, *args, **kwargs) -> OccupancyMap:
-    """The scene cut as the map a caller above the sim and nav layers makes of it."""
-    cut = scene_cut(world, *args, **kwargs)
-    assert isinstance(cut, SceneCut) and cut.height == (args[0] if args else 0.30)
-    return OccupancyMap(cut.occupancy, cut.resolution, cut.origin)
 
 
 def inside(model, data, geom, points):

@@ -227,15 +227,14 @@ def localized_base(config: SurveyConfig, context: BuildContext, base, laser) -> 
 
     o = config.localization
     assert o is not None and laser is not None  # the config checked both
-    from twin.nav.maps import OccupancyMap, load_map
+    from twin.nav.maps import load_map
 
     if config.map_file is not None:
         occupancy = load_map(config.map_file)
     else:
         from twin.sim.scene_map import scene_map
 
-        cut = scene_map(context.sim.world, laser.mount.z, o.resolution)
-        occupancy = OccupancyMap(cut.occupancy, cut.resolution, cut.origin)
+        occupancy = scene_map(context.sim.world, laser.mount.z, o.resolution)
     settings = LocalizerSettings(
         particles=o.particles,
         beams=o.beams,

@@ -1,8 +1,6 @@
 """The reference occupancy map of a scene: the MuJoCo world cut at the laser's height.
 
-``scene_map`` returns a ``SceneCut``: the grid in ``twin.nav.maps.OccupancyMap``'s layout and
-values, which the sim layer may not import (tests/test_layers.py), so a caller above both makes
-the map with ``OccupancyMap(cut.occupancy, cut.resolution, cut.origin)``.
+``scene_map`` returns a ``twin.nav.maps.OccupancyMap``, the type every map of the project is.
 
 A map built from laser scans is only as good as its agreement with the room, and the room is
 known exactly in the twin: every geom whose vertical extent contains the cutting height (the
@@ -31,32 +29,18 @@ from __future__ import annotations
 
 import math
 from collections.abc import Iterable
-from dataclasses import dataclass
 
 import mujoco
 import numpy as np
 
 from twin.core.errors import InputError
+from twin.nav.maps import UNKNOWN, OccupancyMap
 from twin.sim.world import World
 
 LASER_HEIGHT = 0.30  # m above the floor: the Peoplebot's LMS200 scan plane
 SCENE_GROUPS = (0, 1)  # the geom groups the sim laser casts at
 _SIDES = 48  # polygon sides for round cross-sections
 _EPS = 1e-9  # m: overlaps thinner than this do not count
-UNKNOWN = -1.0  # as twin.nav.maps.UNKNOWN
-
-
-@dataclass(frozen=True)
-class SceneCut:
-    """A scene's occupancy at one height, laid out as ``twin.nav.maps.OccupancyMap`` is:
-    ``occupancy[row, col]`` (row 0 at the lowest y) is 1 (occupied), 0 (free) or -1 (unknown);
-    ``resolution`` metres per cell; ``origin`` (x, y, 0) of cell (0, 0)'s lower-left corner;
-    ``height`` the cut's metres above the floor."""
-
-    occupancy: np.ndarray
-    resolution: float
-    origin: tuple[float, float, float]
-    height: float
 
 
 def scene_map(
@@ -67,7 +51,7 @@ def scene_map(
     margin: float = 0.1,
     groups: Iterable[int] = SCENE_GROUPS,
     exclude_bodies: Iterable[str] = (),
-) -> SceneCut:
+) -> OccupancyMap:
     """The scene's occupancy at ``height`` metres above the floor, over the room's floor
     (``World.room_bounds``) grown by ``margin`` metres on every side (so walls outside the floor
     are in it), in cells of ``resolution`` metres; the origin is the grown bounds' lower-left
@@ -96,7 +80,7 @@ def scene_map(
         (centres_x >= xmin) & (centres_x <= xmax)
     )[None, :]
     grid = np.where(occupied, 1.0, np.where(in_room, 0.0, UNKNOWN))
-    return SceneCut(grid, float(resolution), (float(x0), float(y0), 0.0), float(height))
+    return OccupancyMap(grid, float(resolution), (float(x0), float(y0), 0.0))
 
 
 def counted_geoms(
