@@ -78,3 +78,25 @@ def test_go_to_brings_the_sim_robot_within_5_cm_and_3_degrees(
         for p in (pose, odometry(sim), truth(sim)):
             assert p.distance_to(goal) < 0.05
             assert abs(p.heading_error_to(goal)) < math.radians(3.0)
+
+
+def test_driving_into_furniture_presses_a_bumper_and_the_driver_stops() -> None:
+    """The emulated firmware presses the bumper segment facing a contact in the MuJoCo world
+    (and flags a stalled wheel), and the real driver turns either into a DeviceFaultError."""
+    from twin.core.devices import DeviceFaultError
+
+    clock = ManualClock()
+    # just left of the coffee table, facing it: its nearest leg is about 0.3 m ahead
+    sim, _ = make_sim_robot("living_room", start=Pose2D(1.2, 4.2, 0.0))
+    link = MemoryLink(clock, "arcos line")
+    with WorldRunner(sim, clock=clock):
+        server = serve_arcos(sim, link, clock=clock)
+        with sim.lock:
+            start = sim.odometry_pose()
+        base = ArcosBase(lambda: link.transport("ARCOS base"), start=start, clock=clock)
+        try:
+            with base, pytest.raises(DeviceFaultError, match="bumpers|stalled"):
+                base.drive(0.3, 0.0, 4.0)
+        finally:
+            server.stop()
+    assert truth(sim).x < 1.2 + 0.6  # stopped at the table, not driven through it

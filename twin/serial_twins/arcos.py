@@ -40,6 +40,7 @@ from hardware.arcos_codec import (
     vel2_wheels,
 )
 from twin.core.clock import SYSTEM_CLOCK, Clock
+from twin.core.geometry import wrap_angle
 from twin.serial_twins.bytedevice import ByteDevice, DeviceLine
 from twin.serial_twins.pty import PtyLink, check_clock
 
@@ -156,24 +157,25 @@ class KinematicActuator:
 class SimActuator:
     """The MuJoCo robot's wheels and wheel odometry, touched only under ``sim.lock``.
 
-    A wheel stalls like the sim base's own check: motor torque above the sim's stall torque
-    for its stall time (the wheels slip against furniture, so odometry alone would not tell).
+    A wheel stalls as the sim base's own check decides (``drive.StallMonitor`` on the motor
+    torque: the wheels slip against furniture, so odometry alone would not tell), and a contact
+    between the robot and the scene presses the bumper segment facing it, as on the Peoplebot.
     """
 
     def __init__(self, sim: SimRobot) -> None:
         import mujoco
 
-        from twin.sim.robot import STALL_TIME, STALL_TORQUE
+        from twin.sim.drive import StallMonitor
+        from twin.sim.robot import STALL_DUTY, STALL_TIME, STALL_TORQUE
 
         self.sim = sim
         self.track = sim.geometry.track
-        self._stall_torque, self._stall_time = STALL_TORQUE, STALL_TIME
+        self._stall = StallMonitor(STALL_TORQUE, STALL_TIME, STALL_DUTY)
         model = sim.world.model
         self._wheel_act = [
             mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_ACTUATOR, n)
             for n in ("left_wheel", "right_wheel")
         ]
-        self._strain_since: list[float | None] = [None, None]
         with sim.lock:
             self._origin = sim.odometry_pose()
 
@@ -196,16 +198,24 @@ class SimActuator:
     def faults(self) -> DriveFaults:
         with self.sim.lock:
             now = self.sim.world.time
-            torque = [abs(float(self.sim.world.data.actuator_force[a])) for a in self._wheel_act]
-        stalled = []
-        for i, tau in enumerate(torque):
-            if tau < self._stall_torque:
-                self._strain_since[i] = None
-            elif self._strain_since[i] is None:
-                self._strain_since[i] = now
-            since = self._strain_since[i]
-            stalled.append(since is not None and now - since > self._stall_time)
-        return DriveFaults(stalled[0], stalled[1])
+            torque = [float(self.sim.world.data.actuator_force[a]) for a in self._wheel_act]
+            contacts = self.sim.contacts()
+            truth = self.sim.truth_pose()
+        left, right = self._stall.update(now, *torque)
+        front = rear = 0
+        for contact in contacts:
+            x, y, _ = contact.position
+            bearing = float(wrap_angle(math.atan2(y - truth.y, x - truth.x) - truth.yaw))
+            if abs(bearing) <= math.pi / 2:  # five front segments, right to left
+                front |= 1 << _segment(bearing)
+            else:  # five rear segments, left to right as seen from behind
+                rear |= 1 << _segment(float(wrap_angle(bearing - math.pi)))
+        return DriveFaults(left, right, front, rear)
+
+
+def _segment(bearing: float) -> int:
+    """Which of a bumper's five segments (0 = rightmost) faces ``bearing`` (rad, -pi/2..pi/2)."""
+    return max(0, min(4, int((bearing + math.pi / 2) / (math.pi / 5))))
 
 
 # -- the firmware ---------------------------------------------------------------------------------
