@@ -2,11 +2,12 @@
 odometry believes, localized on the scene's map, against the same base on odometry alone."""
 
 import json
+import tomllib
 from pathlib import Path
 
 import pytest
 
-from twin.app.config import ConfigError, load_config
+from twin.app.config import ConfigError, dump_toml, load_config, resolve_config
 from twin.cli import main
 
 REDUCED = "mission.stops=[[1.1, 1.2], [2.5, 3.3], [2.7, 4.4]]"
@@ -29,26 +30,27 @@ def survey(out: Path, cache: Path, *sets: str) -> dict:
 
 
 def test_the_laser_keeps_the_pose_true_where_odometry_drifts(tmp_path, model_cache):
-    laser = survey(
-        tmp_path / "laser",
-        model_cache,
-        "robot.laser.type=sim",
-        "robot.base.pose_source=laser",
-    )
+    laser = survey(tmp_path / "laser", model_cache, "robot.base.pose_source=laser")
     assert laser["status"] == "complete" and laser["views"] == 24
     assert laser["pose_error"]["max_m"] <= 0.05 and laser["pose_error"]["max_deg"] <= 2.0
     assert laser["objects"]["rice_box"]["error_m"] < 0.2
     assert laser["views_refused"] == []
-    odometry = survey(tmp_path / "odometry", model_cache)
+    odometry = survey(tmp_path / "odometry", model_cache, "robot.base.pose_source=odometry")
     # odometry alone: a drifting pose, reported as such in the sim (or a contact on the way)
     assert odometry["pose_error"]["max_m"] > 2 * laser["pose_error"]["max_m"]
 
 
-def test_a_laser_pose_needs_a_laser_and_a_scene_map_needs_the_twin():
+def test_a_laser_pose_needs_a_laser_and_a_scene_map_needs_the_twin(tmp_path):
+    data = tomllib.loads(resolve_config(None).read_text())
+    del data["robot"]["laser"]
+    data["scene"]["file"] = str(resolve_config(None).parent / data["scene"]["file"])
+    no_laser = tmp_path / "no_laser.toml"
+    no_laser.write_text(dump_toml(data))
     with pytest.raises(ConfigError, match=r'pose_source: "laser" needs a \[robot.laser\]'):
-        load_config(None, overrides=["robot.base.pose_source=laser"])
+        load_config(no_laser)
     with pytest.raises(ConfigError, match=r'localization.map: "scene" cuts the map'):
-        load_config("peoplebot_real", overrides=["robot.base.pose_source=laser",
-                    "robot.laser.type=lms2xx", "robot.laser.port=/dev/ttyUSB1"])  # fmt: skip
-    with pytest.raises(ConfigError, match=r'is set but robot.base.pose_source is not "laser"'):
-        load_config(None, overrides=["localization.particles=300"])
+        load_config("peoplebot_real", overrides=["localization.map=scene"])
+    with pytest.raises(ConfigError, match=r"--set localization.particles: expected a whole"):
+        load_config(None, overrides=["robot.base.pose_source=odometry", "localization.particles=5"])
+    odometry = load_config(None, overrides=["robot.base.pose_source=odometry"])
+    assert odometry.localization is None  # the shipped table stays, unused

@@ -28,6 +28,7 @@ COMMAND_MODULES: tuple[str, ...] = (
     "twin.commands.serve_hardware",
     "twin.commands.batch_survey",
     "twin.commands.devices",
+    "twin.commands.map",
 )
 
 

@@ -217,7 +217,21 @@ class MissionWorld:
             for body in self.targets.values():
                 random_surface_pose(world, body, rng)
         self.sim.place(self.start)
+        self._restart_devices()
         return {name: world.support_of(body) for name, body in self.targets.items()}
+
+    def _restart_devices(self) -> None:
+        """Devices that keep state of their own start afresh, as in a new world: the laser's
+        noise, and a localized base's filter (around the mission's start)."""
+        from twin.app.localization import LaserLocalizedBase
+        from twin.sim.laser import SimLaser
+
+        if isinstance(self.robot.laser, SimLaser):
+            self.robot.laser.restart()
+        if isinstance(self.robot.base, LaserLocalizedBase):
+            localization = self.config.localization
+            global_start = localization is not None and localization.global_start
+            self.robot.base.restart(None if global_start else self.start)
 
     def close(self) -> None:
         self.robot.close()

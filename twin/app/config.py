@@ -454,7 +454,8 @@ def _localization(
     root: _Table, devices: dict[str, DeviceConfig], folder: Path
 ) -> tuple[LocalizationOptions | None, Path | None]:
     """The ``[localization]`` table, checked against the base's ``pose_source``: a laser pose
-    needs a laser and a map; a table nothing uses is refused rather than silently ignored."""
+    needs a laser and a map. The table is checked even when another pose source leaves it
+    unused (``--set robot.base.pose_source=odometry`` on a laser config), so it stays valid."""
     base = devices["base"]
     by_laser = base.option("pose_source") == "laser"
     if not root.has("localization"):
@@ -471,14 +472,14 @@ def _localization(
             raise table.fail(exc.key, exc.problem) from None
         table.used.update(table.data)
         if not by_laser:
-            raise table._error(
-                "localization",
-                'is set but robot.base.pose_source is not "laser"; set it, or drop the table',
-            )
+            return None, None  # checked, kept for when the pose source is the laser again
     if "laser" not in devices:
         raise root.fail("robot.base.pose_source", '"laser" needs a [robot.laser] device')
     if options.map == "scene":
-        if devices["laser"].type != "sim" and base.type != "sim":
+        in_the_twin = any(
+            d.type == "sim" or d.option("port") == TWIN_PORT for d in devices.values()
+        )
+        if not in_the_twin:
             raise root.fail(
                 "localization.map",
                 '"scene" cuts the map from the twin\'s scene; on the robot give a map_server '

@@ -138,6 +138,14 @@ class LaserLocalizedBase(Base):
         self._filter().init_pose(pose, self.settings.start_sigma)
         self._settle()
 
+    def restart(self, start: Pose2D | None) -> None:
+        """Forget everything (a reused world for a new mission): the filter starts anew from
+        its seed around ``start`` (``None``: globally) at the next pose it is asked for."""
+        self.start = start
+        self._mcl = None
+        self._estimate = self._odometry_at_estimate = None
+        self._scan = None
+
     def snapshot(self) -> Localization:
         """What the recorder shows of the localization now: scan, mount, particles."""
         particles = self._mcl.particles if self._mcl is not None else None

@@ -194,6 +194,16 @@ class SimLaser(Laser):
         self._latest: Scan | None = None
         self._connected = False
 
+    def restart(self) -> None:
+        """As after power-on in a world that was reset (``World.reset``, ``SimRobot.place``):
+        the noise restarts from the seed (the same unit offset) and no earlier scan is kept, so
+        a mission in a reused world sees what it would in a fresh one."""
+        with self.robot.lock:
+            self._rng = np.random.default_rng(self.spec.seed)
+            self.offset = float(self._rng.uniform(-self.spec.systematic, self.spec.systematic))
+            self._latest = None
+            self._slot = self._slot_now() if self._connected else None
+
     # -- device ---------------------------------------------------------------------------------
     @property
     def mount(self) -> LaserMount:
