@@ -95,7 +95,7 @@ def test_driving_into_furniture_presses_a_bumper_and_the_driver_stops() -> None:
             start = sim.odometry_pose()
         base = ArcosBase(lambda: link.transport("ARCOS base"), start=start, clock=clock)
         try:
-            with base, pytest.raises(DeviceFaultError, match="bumpers|stalled"):
+            with base, pytest.raises(DeviceFaultError, match=r"bumpers|stalled"):
                 base.drive(0.3, 0.0, 4.0)
         finally:
             server.stop()
