@@ -583,5 +583,5 @@ def test_localization_draws_the_map_the_scan_at_the_pose_and_the_particles(tmp_p
     np.testing.assert_allclose(hits, [[1.1 + 0.2 + 1.0, 1.2], [1.1 + 0.2, 1.2 + 0.5]], atol=1e-6)
     (dots,) = seen_2d(rec, "/top/map/particles", 0, "Points2D:positions")
     np.testing.assert_allclose(dots, particles[:, :2], atol=1e-6)
-    (cells,) = seen_2d(rec, "/top/map/occupancy", 0, "Boxes2D:centers")
+    (cells,) = seen_2d(rec, "/top/map/occupancy", 0, "Points2D:positions")
     assert len(cells) == 20 and np.allclose(cells.mean(axis=0), (1.25, 5.05), atol=1e-6)
