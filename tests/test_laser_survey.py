@@ -84,3 +84,29 @@ def test_twin_map_from_the_scene_is_the_shipped_reference(tmp_path):
     assert main(["map", "--from-scene", "--out", str(out), "--quiet"]) == 0
     shipped = load_map(resolve_config(None).parent / "living_room_map.yaml")
     np.testing.assert_array_equal(load_map(out).occupancy, shipped.occupancy)
+
+
+def test_a_robot_carried_off_in_the_twin_is_found_again():
+    """The kidnapped robot in the twin: lifted to another part of the living room while its
+    odometry saw nothing, it re-localizes on the scene's map from its LMS200's scans."""
+    import math
+
+    from twin.app.factory import build_robot
+    from twin.core.geometry import Pose2D
+
+    config = load_config(None)
+    robot, context = build_robot(config)
+    try:
+        with robot:
+            base, sim = robot.base, context.sim_in_use
+            base.go_to(Pose2D(2.5, 3.3, 0.0))
+            before = sim.odometry_pose()
+            sim.place(Pose2D(3.2, 1.3, math.radians(135.0)))  # carried off and turned
+            sim.reset_odometry(before)  # the wheels never turned: odometry still says "here"
+            truth = sim.truth_pose()
+            estimate = base._settle()
+            assert estimate.localized
+            assert math.dist((estimate.pose.x, estimate.pose.y), (truth.x, truth.y)) < 0.05
+            assert abs(math.degrees(truth.heading_error_to(estimate.pose))) < 2.0
+    finally:
+        context.close()
