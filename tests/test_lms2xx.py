@@ -359,13 +359,15 @@ def test_identify_reads_type_and_status_and_changes_nothing(server):
 
 def test_the_serial_twins_offer_the_laser_on_its_own_memory_line():
     from twin.core.geometry import Pose2D
-    from twin.serial_twins.lms2xx import FloorPlanSource
     from twin.serial_twins.session import SerialTwins
     from twin.sim import make_sim_robot
+    from twin.sim.laser import LaserSpec, SimLaser
 
     clock = ManualClock()
     sim, _ = make_sim_robot("living_room", start=Pose2D(2.5, 3.3, 0.0))
-    source = FloorPlanSource(sim)
+    # the MuJoCo laser without noise, so the emulator's bytes can be compared with it exactly
+    exact = LaserSpec(range_sigma=0.0, systematic=0.0, dropout=0.0, resolution=0.0)
+    source = SimLaser(sim, exact).ranges_at
     with SerialTwins(sim, clock=clock, lines="memory", laser_source=source) as twins:
         link = twins.lms2xx_link
         assert isinstance(link, BaudMemoryLink)

@@ -5,15 +5,12 @@ line's own pace. No threads here; the driver against the emulator is tests/test_
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 import pytest
 
 from hardware import lms2xx_codec as codec
 from hardware.lms2xx_codec import Mode, Reply, Signal, Telegram, TelegramParser, Units, Variant
 from twin.serial_twins.lms2xx import (
-    FloorPlanSource,
     LMS2xxEmulator,
     square_room,
 )
@@ -312,46 +309,3 @@ def test_reset_confirms_returns_to_9600_and_announces_itself():
     bench.run(0.3)
     [ready] = replies(bench.take())
     assert ready.command == Reply.POWER_ON and len(codec.decode_power_on(ready)) == 21
-
-
-# -- range sources --------------------------------------------------------------------------------
-
-
-class _Footprint:
-    def __init__(self, polygon):
-        self.polygon = np.asarray(polygon, dtype=float)
-
-
-class _World:
-    def room_bounds(self):
-        return (0.0, 0.0, 4.0, 3.0)
-
-    def furniture(self):
-        return ["box"]
-
-    def footprint(self, name):
-        return _Footprint([[3.0, 0.5], [3.5, 0.5], [3.5, 1.0], [3.0, 1.0]])
-
-
-class _Sim:
-    def __init__(self, pose):
-        import threading
-
-        from twin.core.geometry import Pose2D
-
-        self.world, self.lock, self._pose = _World(), threading.RLock(), Pose2D(*pose)
-
-    def truth_pose(self):
-        return self._pose
-
-
-def test_the_floor_plan_source_casts_rays_at_walls_and_furniture_from_the_robots_pose():
-    from twin.core.devices import LaserMount
-
-    source = FloorPlanSource(_Sim((1.0, 0.75, 0.0)), LaserMount(x=0.2))
-    ranges = source(np.radians([-90.0, 0.0, 90.0, 180.0]))
-    # from (1.2, 0.75): right wall y=0 at 0.75, the box's face x=3 at 1.8, top wall 2.25, the
-    # left wall x=0 behind at 1.2
-    np.testing.assert_allclose(ranges, [0.75, 1.8, 2.25, 1.2])
-    turned = FloorPlanSource(_Sim((1.0, 1.5, math.pi / 2)))
-    np.testing.assert_allclose(turned(np.array([0.0, -math.pi / 2])), [1.5, 3.0])

@@ -52,15 +52,15 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from twin.core.errors import InputError
-    from twin.serial_twins.lms2xx import FloorPlanSource
     from twin.serial_twins.session import SerialTwins
     from twin.sim import SimRobot, World
+    from twin.sim.laser import SimLaser
 
     if not 0.0 < args.time_scale <= 20.0:
         raise InputError(f"--time-scale must be in (0, 20], got {args.time_scale}")
     sim = SimRobot(World(args.scene))
-    # a stand-in until the sim has a laser of its own: the floor plan seen from the true pose
-    laser = FloorPlanSource(sim) if args.laser else None
+    # the emulated scanner reads the MuJoCo laser: what stands at 0.30 m, with the LMS200's noise
+    laser = SimLaser(sim).ranges_at if args.laser else None
     with SerialTwins(
         sim, args.time_scale, args.vcc4_wiring, args.link_dir, laser_source=laser
     ) as twins:

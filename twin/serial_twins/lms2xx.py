@@ -9,9 +9,9 @@ the ``SICK_LMS`` password, ``77`` only there; baud changes answered at the old r
 
 Its ranges come from a ``source``: ``source(angles_rad) -> ranges_m``, beam bearings in the
 scanner's frame (counter-clockwise, value 0 rightmost), metres back with NaN for no return,
-evaluated when a scan is emitted. ``square_room`` is the spec's test room; ``FloorPlanSource``
-ray-casts the MuJoCo world's floor plan (walls and furniture outlines) from the sim robot's
-true pose, the stand-in ``twin serve-hardware`` uses until the sim has a laser of its own.
+evaluated when a scan is emitted. ``square_room`` is the spec's test room; in the twin the
+source is the MuJoCo laser's ``SimLaser.ranges_at`` (``twin serve-hardware --laser``, and a
+config's ``[robot.laser] type = "lms2xx", port = "twin"``).
 
 The line is modelled: every byte takes 10 bits at the current baud rate (``line_time``), so a
 181-value scan takes 97 ms at 38400 baud and the stream runs at ~10 Hz, as on the robot. A scan
@@ -32,20 +32,18 @@ import threading
 from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING
 
 import numpy as np
 
 from hardware import lms2xx_codec as codec
 from hardware.lms2xx_codec import Command, ConfigBlock, Mode, Reply, Telegram, Variant
 from twin.core.clock import SYSTEM_CLOCK, Clock
-from twin.core.devices import LaserMount
 from twin.serial_twins.bytedevice import DeviceLine
 from twin.serial_twins.memory import MemoryLink, MemoryTransport
 from twin.serial_twins.pty import PtyLink, check_clock
 
 if TYPE_CHECKING:
-    from twin.sim.robot import SimRobot
+    pass
 
 RangeSource = Callable[[np.ndarray], np.ndarray]
 
@@ -68,47 +66,6 @@ def square_room(side: float = 4.0) -> RangeSource:
         return half / np.maximum(np.abs(np.cos(angles)), np.abs(np.sin(angles)))
 
     return ranges
-
-
-class FloorPlanSource:
-    """Ranges from the sim world's floor plan: the room's walls and every piece of furniture's
-    outline on the floor (``World.footprints``), seen from the sim robot's true pose and the
-    scanner's ``mount``. A stand-in for a MuJoCo laser: furniture counts as solid down to the
-    floor (a table's top hides what is under it), and nothing moves but the robot."""
-
-    def __init__(self, sim: SimRobot, mount: LaserMount | None = None) -> None:
-        self.sim, self.mount = sim, mount or LaserMount()
-        with sim.lock:
-            world = sim.world
-            x0, y0, x1, y1 = world.room_bounds()
-            corners = np.array([[x0, y0], [x1, y0], [x1, y1], [x0, y1]])
-            outlines = [corners, *(world.footprint(name).polygon for name in world.furniture())]
-        starts, ends = [], []
-        for polygon in outlines:
-            polygon = np.asarray(polygon, dtype=float)
-            if len(polygon) >= 2:
-                starts.append(polygon)
-                ends.append(np.roll(polygon, -1, axis=0))
-        self._p = np.concatenate(starts)
-        self._e = np.concatenate(ends) - self._p
-
-    def __call__(self, angles: np.ndarray) -> np.ndarray:
-        with self.sim.lock:
-            pose = self.sim.truth_pose()
-        m = self.mount
-        c, s = math.cos(pose.yaw), math.sin(pose.yaw)
-        origin = np.array([pose.x + c * m.x - s * m.y, pose.y + s * m.x + c * m.y])
-        bearing = pose.yaw + m.yaw + np.asarray(angles, dtype=float)
-        d = np.stack([np.cos(bearing), np.sin(bearing)], axis=1)  # (n, 2)
-        q = self._p - origin  # (m, 2)
-        e = self._e
-        denom = d[:, None, 0] * e[None, :, 1] - d[:, None, 1] * e[None, :, 0]
-        with np.errstate(divide="ignore", invalid="ignore"):
-            t = (q[None, :, 0] * e[None, :, 1] - q[None, :, 1] * e[None, :, 0]) / denom
-            u = (q[None, :, 0] * d[:, None, 1] - q[None, :, 1] * d[:, None, 0]) / denom
-        hit = (np.abs(denom) > 1e-12) & (t > 1e-9) & (u >= 0.0) & (u <= 1.0)
-        nearest = np.where(hit, t, np.inf).min(axis=1)
-        return np.where(np.isfinite(nearest), nearest, np.nan)
 
 
 # -- the host's line speed ------------------------------------------------------------------------
