@@ -42,9 +42,6 @@ from twin.serial_twins.bytedevice import DeviceLine
 from twin.serial_twins.memory import MemoryLink, MemoryTransport
 from twin.serial_twins.pty import PtyLink, check_clock
 
-if TYPE_CHECKING:
-    pass
-
 RangeSource = Callable[[np.ndarray], np.ndarray]
 
 # model -> (type string, configuration block length), section 11.1
