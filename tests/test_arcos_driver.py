@@ -28,26 +28,26 @@ from twin.core.devices import (
     OutOfRangeError,
 )
 from twin.core.geometry import Pose2D
-from twin.serial_twins.arcos import ArcosServer, KinematicActuator, serve_arcos
-from twin.serial_twins.bytedevice import EchoDevice
+from twin.serial_twins.arcos import KinematicActuator, serve_arcos
+from twin.serial_twins.bytedevice import EchoDevice, LineServer
 from twin.serial_twins.memory import MemoryLink
 from twin.serial_twins.pty import PtyLink
 
 
-def _serve(clock: ManualClock, actuator: KinematicActuator | None = None) -> ArcosServer:
+def _serve(clock: ManualClock, actuator: KinematicActuator | None = None) -> LineServer:
     link = MemoryLink(clock, "arcos line")
     actuator = actuator or KinematicActuator(clock=clock)
     return serve_arcos(actuator, link, aux1=EchoDevice(), clock=clock)
 
 
 @pytest.fixture
-def server() -> Iterator[ArcosServer]:
+def server() -> Iterator[LineServer]:
     srv = _serve(ManualClock())
     yield srv
     srv.stop()
 
 
-def base_on(server: ArcosServer, **options: object) -> ArcosBase:
+def base_on(server: LineServer, **options: object) -> ArcosBase:
     """A driver on the server's line and clock, with short timeouts."""
     options = {"reply_timeout": 0.3, "sync_attempts": 4, "sip_timeout": 0.5, **options}
     link = server.link
@@ -55,13 +55,13 @@ def base_on(server: ArcosServer, **options: object) -> ArcosBase:
     return ArcosBase(lambda: link.transport("ARCOS base"), clock=server.clock, **options)  # type: ignore[arg-type]
 
 
-def odometry_in_map(server: ArcosServer, start: Pose2D) -> Pose2D:
+def odometry_in_map(server: LineServer, start: Pose2D) -> Pose2D:
     x, y, th = server.emulator.actuator.odometry()
     c, s = math.cos(start.yaw), math.sin(start.yaw)
     return Pose2D(start.x + c * x - s * y, start.y + s * x + c * y, start.yaw + th)
 
 
-def test_connect_reports_identity_and_anchors_the_start(server: ArcosServer) -> None:
+def test_connect_reports_identity_and_anchors_the_start(server: LineServer) -> None:
     start = Pose2D(1.0, 2.0, math.pi / 2)
     with base_on(server, start=start) as base:
         assert base.identity == ("twin", "Pioneer", "peoplebot-sh")
@@ -73,13 +73,13 @@ def test_connect_reports_identity_and_anchors_the_start(server: ArcosServer) -> 
     assert server.emulator.commands[-1] == (2, 1)
 
 
-def test_use_before_connect_is_a_typed_error(server: ArcosServer) -> None:
+def test_use_before_connect_is_a_typed_error(server: LineServer) -> None:
     with pytest.raises(NotConnectedError):
         base_on(server).pose()
 
 
 def test_drive_moves_the_robot_for_its_duration_and_the_pose_tracks_its_odometry(
-    server: ArcosServer,
+    server: LineServer,
 ) -> None:
     start = Pose2D(0.5, 0.5, 0.0)
     clock = server.clock
@@ -97,7 +97,7 @@ def test_drive_moves_the_robot_for_its_duration_and_the_pose_tracks_its_odometry
             base.drive(3.0, 0.0, 1.0)
 
 
-def test_go_to_ends_within_5_cm_and_3_degrees(server: ArcosServer) -> None:
+def test_go_to_ends_within_5_cm_and_3_degrees(server: LineServer) -> None:
     start = Pose2D(1.0, 1.0, 0.0)
     with base_on(server, start=start) as base:
         for goal in (
@@ -112,7 +112,7 @@ def test_go_to_ends_within_5_cm_and_3_degrees(server: ArcosServer) -> None:
                 assert abs(p.heading_error_to(goal)) < math.radians(3.0)
 
 
-def test_set_pose_reanchors_without_moving(server: ArcosServer) -> None:
+def test_set_pose_reanchors_without_moving(server: LineServer) -> None:
     with base_on(server) as base:
         base.set_pose(Pose2D(3.0, 4.0, 1.0))
         pose = base.pose()
@@ -122,7 +122,7 @@ def test_set_pose_reanchors_without_moving(server: ArcosServer) -> None:
         assert pose.x > 3.0 and pose.y > 4.0  # forward along yaw 1 rad
 
 
-def test_keepalive_holds_the_watchdog_off(server: ArcosServer) -> None:
+def test_keepalive_holds_the_watchdog_off(server: LineServer) -> None:
     with base_on(server) as base:
         server.clock.sleep(2.6)  # idle past the 2 s watchdog: the reader thread sent PULSEs
         assert not server.emulator.watchdog_tripped
@@ -132,7 +132,7 @@ def test_keepalive_holds_the_watchdog_off(server: ArcosServer) -> None:
         assert server.emulator.watchdog_tripped
 
 
-def test_robot_left_open_by_a_crashed_client_is_closed_and_resynced(server: ArcosServer) -> None:
+def test_robot_left_open_by_a_crashed_client_is_closed_and_resynced(server: LineServer) -> None:
     crashed = base_on(server)
     crashed.connect()
     crashed._stop_link()  # a client that dies without CLOSE
@@ -142,7 +142,7 @@ def test_robot_left_open_by_a_crashed_client_is_closed_and_resynced(server: Arco
         assert base.identity is not None and base.pose() is not None
 
 
-def test_junk_bad_checksums_and_truncated_packets_are_survived(server: ArcosServer) -> None:
+def test_junk_bad_checksums_and_truncated_packets_are_survived(server: LineServer) -> None:
     with base_on(server) as base:
         faults = server.emulator.faults
         faults.junk = b"WMS2\r\xfa\x00garbage"
@@ -157,7 +157,7 @@ def test_junk_bad_checksums_and_truncated_packets_are_survived(server: ArcosServ
         assert base.sip_count > count and pose.x > 0.05
 
 
-def test_a_robot_that_stops_answering_is_a_timeout_not_a_hang(server: ArcosServer) -> None:
+def test_a_robot_that_stops_answering_is_a_timeout_not_a_hang(server: LineServer) -> None:
     clock = server.clock
     with base_on(server) as base:
         server.emulator.faults.mute = True
@@ -169,7 +169,7 @@ def test_a_robot_that_stops_answering_is_a_timeout_not_a_hang(server: ArcosServe
             base.pose()
 
 
-def test_handshake_with_a_silent_robot_times_out(server: ArcosServer) -> None:
+def test_handshake_with_a_silent_robot_times_out(server: LineServer) -> None:
     server.emulator.faults.mute = True
     base = base_on(server, reply_timeout=0.2, sync_attempts=3)
     began = server.clock.now()
@@ -179,7 +179,7 @@ def test_handshake_with_a_silent_robot_times_out(server: ArcosServer) -> None:
     assert not base.is_connected
 
 
-def test_stall_during_motion_is_a_fault(server: ArcosServer) -> None:
+def test_stall_during_motion_is_a_fault(server: LineServer) -> None:
     with base_on(server) as base:
         server.emulator.actuator.stalled = True
         with pytest.raises(DeviceFaultError, match="stalled"):
@@ -191,7 +191,7 @@ def test_stall_during_motion_is_a_fault(server: ArcosServer) -> None:
 
 
 def test_a_line_cut_mid_use_reconnects_through_the_still_open_handshake(
-    server: ArcosServer,
+    server: LineServer,
 ) -> None:
     start = Pose2D(1.0, 1.0, 0.0)
     with base_on(server, start=start) as base:
@@ -204,7 +204,7 @@ def test_a_line_cut_mid_use_reconnects_through_the_still_open_handshake(
         assert before.x > 1.1
 
 
-def test_a_line_cut_without_auto_reconnect_is_connection_lost(server: ArcosServer) -> None:
+def test_a_line_cut_without_auto_reconnect_is_connection_lost(server: LineServer) -> None:
     with base_on(server, auto_reconnect=False) as base:
         server.hangup()
         server.clock.sleep(0.05)  # the reader's next 20 ms read meets the dead line
@@ -214,7 +214,7 @@ def test_a_line_cut_without_auto_reconnect_is_connection_lost(server: ArcosServe
             base.go_to(Pose2D(1.0, 0.0, 0.0))
 
 
-def test_aux_tunnel_round_trip(server: ArcosServer) -> None:
+def test_aux_tunnel_round_trip(server: LineServer) -> None:
     clock = server.clock
     with base_on(server) as base:
         aux = base.aux_transport()
@@ -235,7 +235,7 @@ def test_aux_tunnel_round_trip(server: ArcosServer) -> None:
         assert aux.read(1, 0.2) == b""
 
 
-def test_failed_connect_leaves_the_robot_closed(server: ArcosServer) -> None:
+def test_failed_connect_leaves_the_robot_closed(server: LineServer) -> None:
     original = server.emulator._handle
 
     def refuse_enable(number: int, arg: object, now: float) -> None:
@@ -273,7 +273,7 @@ SCALE = 4.0  # the kinematic robot's clock runs this much faster than the wall
 
 
 @pytest.fixture
-def pty_server(tmp_path: Path) -> Iterator[ArcosServer]:
+def pty_server(tmp_path: Path) -> Iterator[LineServer]:
     srv = serve_arcos(KinematicActuator(SCALE), PtyLink(tmp_path / "arcos"), aux1=EchoDevice())
     yield srv
     srv.stop()
@@ -290,7 +290,7 @@ def _eventually(condition: Callable[[], bool], seconds: float = 10.0) -> bool:
     return True
 
 
-def test_cli_status_and_drive(pty_server: ArcosServer, capsys: pytest.CaptureFixture[str]) -> None:
+def test_cli_status_and_drive(pty_server: LineServer, capsys: pytest.CaptureFixture[str]) -> None:
     from twin.cli import main
 
     path = pty_server.path
@@ -307,7 +307,7 @@ def test_cli_status_and_drive(pty_server: ArcosServer, capsys: pytest.CaptureFix
     assert "no such port" in capsys.readouterr().err
 
 
-def test_pty_hangup_mid_use_reopens_the_port_and_reconnects(pty_server: ArcosServer) -> None:
+def test_pty_hangup_mid_use_reopens_the_port_and_reconnects(pty_server: LineServer) -> None:
     start = Pose2D(1.0, 1.0, 0.0)
     with ArcosBase.open(pty_server.path, start=start) as base:
         base.drive(0.1, 0.0, 0.5)
@@ -319,7 +319,7 @@ def test_pty_hangup_mid_use_reopens_the_port_and_reconnects(pty_server: ArcosSer
         assert before.x > 1.1
 
 
-def test_pty_hangup_without_auto_reconnect_is_connection_lost(pty_server: ArcosServer) -> None:
+def test_pty_hangup_without_auto_reconnect_is_connection_lost(pty_server: LineServer) -> None:
     with ArcosBase.open(pty_server.path, auto_reconnect=False) as base:
         pty_server.hangup()
         # the reader thread meets the dead pty on its next read (a 20 ms slice)

@@ -30,32 +30,33 @@ from twin.core.devices import (
 )
 from twin.core.errors import InputError
 from twin.serial_twins import lms2xx as emulated
-from twin.serial_twins.lms2xx import BaudMemoryLink, LMS2xxServer, serve_lms2xx, square_room
+from twin.serial_twins.bytedevice import LineServer
+from twin.serial_twins.lms2xx import BaudMemoryLink, serve_lms2xx, square_room
 from twin.serial_twins.pty import PtyLink
 
 ROOM = square_room()
 
 
-def serve(clock: ManualClock | None = None, **options: object) -> LMS2xxServer:
+def serve(clock: ManualClock | None = None, **options: object) -> LineServer:
     clock = clock or ManualClock()
     return serve_lms2xx(ROOM, BaudMemoryLink(clock, "lms2xx line"), clock=clock, **options)
 
 
 @pytest.fixture
-def server() -> Iterator[LMS2xxServer]:
+def server() -> Iterator[LineServer]:
     srv = serve()
     yield srv
     srv.stop()
 
 
-def laser_on(server: LMS2xxServer, **options: object) -> LMS2xx:
+def laser_on(server: LineServer, **options: object) -> LMS2xx:
     """A driver on the server's line and clock."""
     link = server.link
     assert isinstance(link, BaudMemoryLink)
     return LMS2xx(lambda: link.transport("SICK LMS2xx"), clock=server.clock, **options)  # type: ignore[arg-type]
 
 
-def commands(server: LMS2xxServer) -> list[str]:
+def commands(server: LineServer) -> list[str]:
     return [c.hex(" ").upper() for c in server.emulator.commands()]
 
 
@@ -387,7 +388,7 @@ def test_the_serial_twins_offer_the_laser_on_its_own_memory_line():
 
 
 @pytest.fixture
-def pty_server(tmp_path: Path) -> Iterator[LMS2xxServer]:
+def pty_server(tmp_path: Path) -> Iterator[LineServer]:
     def left_half_open(angles: np.ndarray) -> np.ndarray:
         return np.where(angles > math.radians(45), np.nan, ROOM(angles))
 

@@ -309,7 +309,7 @@ def test_emulator_answers_after_its_latency_and_the_bytes_time_on_the_line() -> 
     emu = VCC4Emulator(KinematicHead(clock), host_mode=True, pedestal_ready=True)  # 9600 baud
     emu.receive(codec.pan_tilt_request(), clock.now())
     on_line = 10 * 14 / 9600  # the 14-byte position answer, 10 bits a byte
-    assert emu.next_due() == pytest.approx(0.010 + on_line)
+    assert emu.next_wake(0.0) == pytest.approx(0.010 + on_line)
     assert emu.transmit(0.010 + on_line - 1e-4) == b""
     assert emu.transmit(0.010 + on_line) == codec.answer_frame(0, b"80008000")
 
@@ -360,7 +360,7 @@ class LoopTransport:
                 out = bytes(self.buffer[: min(size, self.chunk)])
                 del self.buffer[: len(out)]
                 return out
-            due = self.emulator.next_due()
+            due = self.emulator.next_wake(0.0)
             clock.sleep((end if due is None else min(due, end)) - clock.now())
 
     def reset_input(self) -> None:

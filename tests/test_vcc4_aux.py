@@ -16,7 +16,8 @@ import pytest
 from hardware.arcos import ArcosBase
 from hardware.vcc4 import VCC4
 from twin.cli import main
-from twin.serial_twins.arcos import ArcosServer, serve_arcos
+from twin.serial_twins.arcos import serve_arcos
+from twin.serial_twins.bytedevice import LineServer
 from twin.serial_twins.pty import PtyLink
 from twin.serial_twins.runner import WorldRunner
 from twin.serial_twins.vcc4 import SimHeadActuator, VCC4Emulator, VCC4Timing
@@ -33,7 +34,7 @@ def sim() -> Iterator[SimRobot]:
 
 
 @pytest.fixture
-def server(sim: SimRobot, tmp_path: Path) -> Iterator[ArcosServer]:
+def server(sim: SimRobot, tmp_path: Path) -> Iterator[LineServer]:
     camera = VCC4Emulator(
         SimHeadActuator(sim), timing=VCC4Timing(power_seconds=0.2, init_seconds=0.2)
     )
@@ -42,7 +43,7 @@ def server(sim: SimRobot, tmp_path: Path) -> Iterator[ArcosServer]:
 
 
 def test_driver_moves_the_sim_head_through_the_aux_tunnel(
-    sim: SimRobot, server: ArcosServer
+    sim: SimRobot, server: LineServer
 ) -> None:
     with (
         ArcosBase.open(server.path) as base,
@@ -55,7 +56,7 @@ def test_driver_moves_the_sim_head_through_the_aux_tunnel(
         assert camera.zoom_to(300) == 300
 
 
-def test_cli_via_aux(server: ArcosServer, capsys: pytest.CaptureFixture[str]) -> None:
+def test_cli_via_aux(server: LineServer, capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["hw", "vcc4", "--port", server.path, "--via-aux", "goto", "12", "0"]) == 0
     pan, tilt = re.match(r"pan (\S+) deg, tilt (\S+) deg", capsys.readouterr().out).groups()
     assert (float(pan), float(tilt)) == pytest.approx((12.0, 0.0), abs=0.1)

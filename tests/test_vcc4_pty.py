@@ -21,10 +21,11 @@ from hardware.vcc4 import VCC4
 from twin.cli import main
 from twin.core.clock import ManualClock
 from twin.core.devices import ConnectionLostError, DeviceTimeoutError, ProtocolError
+from twin.serial_twins.bytedevice import LineServer
 from twin.serial_twins.memory import MemoryLink
 from twin.serial_twins.pty import PtyLink
 from twin.serial_twins.runner import WorldRunner
-from twin.serial_twins.vcc4 import VCC4Server, VCC4Timing, serve_vcc4
+from twin.serial_twins.vcc4 import VCC4Timing, serve_vcc4
 from twin.sim import SimRobot, make_sim_robot
 
 TIME_SCALE = 4.0
@@ -39,7 +40,7 @@ def sim() -> Iterator[SimRobot]:
 
 
 @pytest.fixture
-def server(sim: SimRobot, tmp_path: Path) -> Iterator[VCC4Server]:
+def server(sim: SimRobot, tmp_path: Path) -> Iterator[LineServer]:
     timing = VCC4Timing(power_seconds=0.2, init_seconds=0.2)
     with serve_vcc4(sim, PtyLink(tmp_path / "vcc4"), timing=timing, camera_on=False) as srv:
         yield srv
@@ -54,7 +55,7 @@ def virtual_sim() -> Iterator[tuple[SimRobot, ManualClock]]:
 
 
 @pytest.fixture
-def virtual(virtual_sim: tuple[SimRobot, ManualClock]) -> Iterator[tuple[VCC4Server, VCC4]]:
+def virtual(virtual_sim: tuple[SimRobot, ManualClock]) -> Iterator[tuple[LineServer, VCC4]]:
     """An emulator with the real camera's timing on a memory line, and a driver on it."""
     sim, clock = virtual_sim
     link = MemoryLink(clock, "vcc4 line")
@@ -65,7 +66,7 @@ def virtual(virtual_sim: tuple[SimRobot, ManualClock]) -> Iterator[tuple[VCC4Ser
 
 
 def test_move_to_reaches_the_angle_in_the_sim_left_positive(
-    sim: SimRobot, server: VCC4Server
+    sim: SimRobot, server: LineServer
 ) -> None:
     with VCC4.open(server.path) as camera:
         assert server.emulator.host_mode and server.emulator.pedestal_ready
@@ -101,7 +102,7 @@ def _top_pan_rate(sim: SimRobot, move: object) -> float:
 
 
 def test_speeds_are_respected(
-    virtual_sim: tuple[SimRobot, ManualClock], virtual: tuple[VCC4Server, VCC4]
+    virtual_sim: tuple[SimRobot, ManualClock], virtual: tuple[LineServer, VCC4]
 ) -> None:
     sim, clock = virtual_sim
     _, camera = virtual
@@ -115,7 +116,7 @@ def test_speeds_are_respected(
         assert fast > math.radians(60)
 
 
-def test_a_silent_camera_is_a_timeout_not_a_hang(virtual: tuple[VCC4Server, VCC4]) -> None:
+def test_a_silent_camera_is_a_timeout_not_a_hang(virtual: tuple[LineServer, VCC4]) -> None:
     server, camera = virtual
     camera.answer_timeout = 0.3
     with camera:
@@ -129,7 +130,7 @@ def test_a_silent_camera_is_a_timeout_not_a_hang(virtual: tuple[VCC4Server, VCC4
         assert camera.position() == pytest.approx((0.0, 0.0), abs=TOLERANCE)
 
 
-def test_line_faults_are_recovered_or_typed(virtual: tuple[VCC4Server, VCC4]) -> None:
+def test_line_faults_are_recovered_or_typed(virtual: tuple[LineServer, VCC4]) -> None:
     server, camera = virtual
     faults = server.emulator.faults
     with camera:
@@ -146,7 +147,7 @@ def test_line_faults_are_recovered_or_typed(virtual: tuple[VCC4Server, VCC4]) ->
         assert camera.position()[0] == pytest.approx(math.radians(5), abs=TOLERANCE)
 
 
-def test_a_cut_memory_line_is_reopened_by_the_driver(virtual: tuple[VCC4Server, VCC4]) -> None:
+def test_a_cut_memory_line_is_reopened_by_the_driver(virtual: tuple[LineServer, VCC4]) -> None:
     server, camera = virtual
     with camera:
         camera.move_to(math.radians(10))
@@ -156,7 +157,7 @@ def test_a_cut_memory_line_is_reopened_by_the_driver(virtual: tuple[VCC4Server, 
         )
 
 
-def test_hangup_mid_use_reopens_or_says_connection_lost(server: VCC4Server) -> None:
+def test_hangup_mid_use_reopens_or_says_connection_lost(server: LineServer) -> None:
     with VCC4.open(server.path) as camera:
         camera.move_to(math.radians(10))
         server.hangup()  # unplugged and plugged in again: a new pty behind the same path
@@ -177,7 +178,7 @@ def _numbers(text: str) -> list[float]:
     return [float(n) for n in re.findall(r"-?\d+(?:\.\d+)?", text.split("\n")[-2])]
 
 
-def test_cli_goto_and_position(server: VCC4Server, capsys: pytest.CaptureFixture[str]) -> None:
+def test_cli_goto_and_position(server: LineServer, capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["hw", "vcc4", "--port", server.path, "init"]) == 0
     assert capsys.readouterr().out.startswith("initialised")
     assert main(["hw", "vcc4", "--port", server.path, "goto", "25", "-5"]) == 0

@@ -41,8 +41,8 @@ from hardware.arcos_codec import (
 )
 from twin.core.clock import SYSTEM_CLOCK, Clock
 from twin.core.geometry import wrap_angle
-from twin.serial_twins.bytedevice import ByteDevice, DeviceLine
-from twin.serial_twins.pty import PtyLink, check_clock
+from twin.serial_twins.bytedevice import ByteDevice, DeviceLine, LineServer
+from twin.serial_twins.pty import PtyLink
 
 if TYPE_CHECKING:
     from twin.sim.robot import SimRobot
@@ -539,57 +539,6 @@ class ArcosEmulator:
 # -- on a pseudo-terminal ----------------------------------------------------------------------
 
 
-class ArcosServer:
-    """An ``ArcosEmulator`` served on a line (``PtyLink`` or ``MemoryLink``) by a daemon thread
-    that ticks it every ``period`` seconds of ``clock``; ``path`` is what the driver opens on a
-    pty. ``hangup()`` unplugs and replugs the line (the emulator keeps its state, so the driver
-    meets a robot that is still open)."""
-
-    def __init__(
-        self,
-        emulator: ArcosEmulator,
-        link: DeviceLine,
-        period: float = 0.004,
-        clock: Clock = SYSTEM_CLOCK,
-    ) -> None:
-        check_clock(link, clock)
-        self.emulator, self.link, self.period, self.clock = emulator, link, period, clock
-        self._stop = threading.Event()
-        self._thread = clock.start_thread(self._run, name="arcos-emulator")
-
-    @property
-    def path(self) -> str:
-        if not isinstance(self.link, PtyLink):
-            raise TypeError("a memory line has no path: plug a driver in with link.transport()")
-        return self.link.path
-
-    def _run(self) -> None:
-        emu, link, clock = self.emulator, self.link, self.clock
-        while not self._stop.is_set():
-            data = link.read(512, self.period)
-            now = clock.now()
-            emu.receive(data, now)
-            emu.tick(now)
-            out = emu.transmit(now)
-            if out:
-                link.write(out)
-
-    def hangup(self) -> None:
-        self.link.hangup()
-
-    def stop(self) -> None:
-        self._stop.set()
-        self.clock.join(self._thread, 2.0)
-        self.emulator.actuator.set_velocity(0.0, 0.0)
-        self.link.close()
-
-    def __enter__(self) -> ArcosServer:
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.stop()
-
-
 def serve_arcos(
     sim_or_actuator: SimRobot | DriveActuator,
     link: DeviceLine | None = None,
@@ -597,7 +546,7 @@ def serve_arcos(
     *,
     clock: Clock = SYSTEM_CLOCK,
     **options: object,
-) -> ArcosServer:
+) -> LineServer:
     """Start an emulated ARCOS base on ``link`` (a new pseudo-terminal if None) driving a
     ``SimRobot`` (through ``SimActuator``) or any ``DriveActuator``; ``aux1`` is the device on
     the robot's AUX1 port; ``clock`` times the SIP cycle and the watchdog; ``options`` go to
@@ -609,4 +558,8 @@ def serve_arcos(
     else:
         actuator = SimActuator(sim_or_actuator)  # type: ignore[arg-type]
     emulator = ArcosEmulator(actuator, aux1, **options)  # type: ignore[arg-type]
-    return ArcosServer(emulator, link if link is not None else PtyLink(), clock=clock)
+    line = link if link is not None else PtyLink()
+    stop_wheels = lambda: emulator.actuator.set_velocity(0.0, 0.0)  # noqa: E731
+    # a fixed 4 ms round: the firmware's SIP cycle and motion control tick on their own
+    return LineServer(emulator, line, clock, name="arcos-emulator", max_wait=0.004,
+                      read_size=512, on_stop=stop_wheels)  # fmt: skip

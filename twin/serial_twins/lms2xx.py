@@ -38,9 +38,9 @@ import numpy as np
 from hardware import lms2xx_codec as codec
 from hardware.lms2xx_codec import Command, ConfigBlock, Mode, Reply, Telegram, Variant
 from twin.core.clock import SYSTEM_CLOCK, Clock
-from twin.serial_twins.bytedevice import DeviceLine
+from twin.serial_twins.bytedevice import DeviceLine, LineServer
 from twin.serial_twins.memory import MemoryLink, MemoryTransport
-from twin.serial_twins.pty import PtyLink, check_clock
+from twin.serial_twins.pty import PtyLink
 
 RangeSource = Callable[[np.ndarray], np.ndarray]
 
@@ -600,72 +600,19 @@ _HANDLERS: dict[int, _Handler] = {
 # -- the line server ------------------------------------------------------------------------------
 
 
-class LMS2xxServer:
-    """A thread pumping bytes between a line (``PtyLink``, ``BaudMemoryLink``) and the
-    emulator, on ``clock``: it waits until the next byte, scan or reply is due (at most
-    ``period`` seconds), so the stream's timing follows the clock."""
-
-    def __init__(
-        self,
-        emulator: LMS2xxEmulator,
-        link: DeviceLine,
-        clock: Clock = SYSTEM_CLOCK,
-        period: float = 0.05,
-    ) -> None:
-        check_clock(link, clock)
-        self.emulator, self.link, self.clock, self.period = emulator, link, clock, period
-        self._speed = host_line_speed(link)
-        emulator.line_speed = self._speed
-        self._stop = threading.Event()
-        self._thread = clock.start_thread(self._run, name="lms2xx-line")
-
-    @property
-    def path(self) -> str:
-        """What the driver opens (``LMS2xx.open(server.path)``): the pseudo-terminal's path."""
-        if not isinstance(self.link, PtyLink):
-            raise TypeError("a memory line has no path: plug a driver in with link.transport()")
-        return self.link.path
-
-    def _run(self) -> None:
-        emulator, link, clock = self.emulator, self.link, self.clock
-        while not self._stop.is_set():
-            now = clock.now()
-            wait = min(max(emulator.next_wake(now) - now, 0.0), self.period)
-            data = link.read(4096, wait)
-            now = clock.now()
-            emulator.receive(data, now)
-            emulator.tick(now)
-            out = emulator.transmit(now)
-            if out:
-                link.write(out)
-
-    def hangup(self) -> None:
-        """Unplug and replug the cable: the line is replaced, the scanner keeps its state."""
-        self.link.hangup()
-
-    def stop(self) -> None:
-        self._stop.set()
-        self.clock.join(self._thread, 2.0)
-        self.link.close()
-        if isinstance(self._speed, _PtySpeed):
-            self._speed.close()
-
-    def __enter__(self) -> LMS2xxServer:
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.stop()
-
-
 def serve_lms2xx(
     source: RangeSource,
     link: DeviceLine | None = None,
     *,
     clock: Clock = SYSTEM_CLOCK,
     **emulator_options: object,
-) -> LMS2xxServer:
+) -> LineServer:
     """Start an emulated LMS2xx on ``link`` (a new pseudo-terminal if None) whose ranges come
     from ``source``; ``emulator_options`` go to ``LMS2xxEmulator``. Returns the running server
     (``.path`` for a pty, ``.link.transport(name)`` for a ``BaudMemoryLink``)."""
     emulator = LMS2xxEmulator(source, **emulator_options)  # type: ignore[arg-type]
-    return LMS2xxServer(emulator, link if link is not None else PtyLink(), clock)
+    line = link if link is not None else PtyLink()
+    speed = host_line_speed(line)  # the emulator honours the host's rate, as the real line does
+    emulator.line_speed = speed
+    close = speed.close if isinstance(speed, _PtySpeed) else None
+    return LineServer(emulator, line, clock, name="lms2xx-line", on_stop=close)

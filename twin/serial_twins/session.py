@@ -14,8 +14,8 @@ from pathlib import Path
 
 from twin.core.clock import SYSTEM_CLOCK, Clock
 from twin.serial_twins.arcos import serve_arcos
-from twin.serial_twins.bytedevice import DeviceLine
-from twin.serial_twins.lms2xx import BaudMemoryLink, LMS2xxServer, RangeSource, serve_lms2xx
+from twin.serial_twins.bytedevice import DeviceLine, LineServer
+from twin.serial_twins.lms2xx import BaudMemoryLink, RangeSource, serve_lms2xx
 from twin.serial_twins.memory import MemoryLink
 from twin.serial_twins.pty import PtyLink
 from twin.serial_twins.runner import WorldRunner
@@ -63,7 +63,7 @@ class SerialTwins:
         else:
             self._vcc4 = serve_vcc4(sim, link("vcc4"), clock=clock)
         self._arcos = serve_arcos(sim, link("arcos"), aux1=aux1, clock=clock)
-        self._lms2xx: LMS2xxServer | None = None
+        self._lms2xx: LineServer | None = None
         if laser_source is not None:
             self._lms2xx = serve_lms2xx(
                 laser_source, link("lms2xx"), clock=clock, **(laser_options or {})
@@ -100,7 +100,7 @@ class SerialTwins:
         return self._lms2xx.link if self._lms2xx is not None else None
 
     @property
-    def lms2xx(self) -> LMS2xxServer | None:
+    def lms2xx(self) -> LineServer | None:
         """The laser's server (its ``emulator`` for fault injection), or None."""
         return self._lms2xx
 

@@ -24,8 +24,8 @@ from typing import Any, Protocol
 from hardware import vcc4_codec as codec
 from twin.core.clock import SYSTEM_CLOCK, Clock
 from twin.core.devices import VCC4_LIMITS, PanTiltLimits
-from twin.serial_twins.bytedevice import DeviceLine
-from twin.serial_twins.pty import PtyLink, check_clock
+from twin.serial_twins.bytedevice import DeviceLine, LineServer
+from twin.serial_twins.pty import PtyLink
 
 
 def _rad(counts: float) -> float:
@@ -223,7 +223,7 @@ class VCC4Emulator:
             self._outbox = [(due, data) for due, data in self._outbox if due > now]
             return b"".join(ready)
 
-    def next_due(self) -> float | None:
+    def next_wake(self, now: float) -> float | None:
         """When the next answer goes out (clock seconds), None if none is pending."""
         with self._lock:
             return min((due for due, _ in self._outbox), default=None)
@@ -523,69 +523,19 @@ _HANDLERS: dict[int, _Handler] = {
 # -- pseudo-terminal server ---------------------------------------------------------------------
 
 
-class VCC4Server:
-    """A thread pumping bytes between a line (``PtyLink`` or ``MemoryLink``) and an emulator
-    (direct RS-232 wiring), timing the answers on ``clock``."""
-
-    def __init__(
-        self, emulator: VCC4Emulator, link: DeviceLine, clock: Clock = SYSTEM_CLOCK
-    ) -> None:
-        check_clock(link, clock)
-        self.emulator, self.link, self.clock = emulator, link, clock
-        self._stop = threading.Event()
-        self._thread: threading.Thread | None = None
-
-    @property
-    def path(self) -> str:
-        """What the driver opens (``VCC4.open(server.path)``): the pseudo-terminal's path."""
-        if not isinstance(self.link, PtyLink):
-            raise TypeError("a memory line has no path: plug a driver in with link.transport()")
-        return self.link.path
-
-    def start(self) -> VCC4Server:
-        self._thread = self.clock.start_thread(self._run, name="vcc4-line")
-        return self
-
-    def _run(self) -> None:
-        emulator, link, clock = self.emulator, self.link, self.clock
-        while not self._stop.is_set():
-            due = emulator.next_due()
-            wait = 0.05 if due is None else min(0.05, max(0.0, due - clock.now()))
-            data = link.read(256, wait)
-            if data:
-                emulator.receive(data, clock.now())
-            out = emulator.transmit(clock.now())
-            if out:
-                link.write(out)
-
-    def hangup(self) -> None:
-        """Unplug and replug: the line is replaced (a pty's link path follows)."""
-        self.link.hangup()
-
-    def stop(self) -> None:
-        self._stop.set()
-        if self._thread is not None:
-            self.clock.join(self._thread, 2.0)
-        self.link.close()
-
-    def __enter__(self) -> VCC4Server:
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.stop()
-
-
 def serve_vcc4(
     sim_or_head: Any,
     link: DeviceLine | None = None,
     *,
     clock: Clock = SYSTEM_CLOCK,
     **emulator_options: Any,
-) -> VCC4Server:
+) -> LineServer:
     """Start an emulated VC-C4 on ``link`` (a new pseudo-terminal if None), moving
     ``sim_or_head``: a ``SimRobot`` (wrapped in ``SimHeadActuator``; keep a ``WorldRunner``
     stepping it) or a ``HeadActuator``. ``emulator_options`` go to ``VCC4Emulator``. Returns
     the running server (``.path`` for a pty, ``.link.transport()`` for a memory line)."""
     head = SimHeadActuator(sim_or_head) if hasattr(sim_or_head, "command_head") else sim_or_head
     line = link if link is not None else PtyLink()
-    return VCC4Server(VCC4Emulator(head, **emulator_options), line, clock).start()
+    return LineServer(
+        VCC4Emulator(head, **emulator_options), line, clock, name="vcc4-line", read_size=256
+    )
