@@ -41,7 +41,7 @@ from hardware.arcos_codec import (
     parse_sync2,
     xy_delta,
 )
-from hardware.transport import SerialTransport, Transport
+from hardware.transport import FrameReader, SerialTransport, Transport
 from twin.core.clock import SYSTEM_CLOCK, Clock
 from twin.core.devices import (
     PIONEER_LIMITS,
@@ -371,16 +371,13 @@ class ArcosBase(Base):
                 step = 0
 
     def _io_loop(self, transport: Transport) -> None:
-        parser = PacketParser()
-        last_byte = self.clock.now()
+        reader = FrameReader(
+            PacketParser(), self.clock.now, (PacketError,), self._note_error, INTER_BYTE_LIMIT
+        )
         while not self._stop_io.is_set():
             try:
-                # one byte with a timeout, then whatever else is there: low latency, no spin
-                data = transport.read(1, 0.02)
-                if data:
-                    data += transport.read(4096, 0.0)
-                now = self.clock.now()
-                if now - self._last_write >= self.pulse_period:
+                reader.read(transport)
+                if self.clock.now() - self._last_write >= self.pulse_period:
                     self._write(command(Command.PULSE))
             except DeviceError as exc:
                 with self._cond:
@@ -392,22 +389,8 @@ class ArcosBase(Base):
                     )
                     self._cond.notify_all()
                 return
-            if data:
-                last_byte = now
-                parser.feed(data)
-            elif parser.partial and now - last_byte > INTER_BYTE_LIMIT:
-                try:
-                    parser.expire_partial()
-                except PacketError as exc:
-                    self._note_error(exc)
-            while True:
-                try:
-                    packet = parser.next()
-                except PacketError as exc:
-                    self._note_error(exc)
-                    continue
-                if packet is None:
-                    break
+            now = self.clock.now()
+            for packet in reader.frames():
                 self._dispatch(packet, now)
 
     def _dispatch(self, packet: bytes, now: float) -> None:

@@ -49,7 +49,7 @@ from hardware.lms2xx_codec import (
     Units,
     Variant,
 )
-from hardware.transport import SerialTransport, Transport
+from hardware.transport import FrameReader, SerialTransport, Transport
 from twin.core.clock import SYSTEM_CLOCK, Clock
 from twin.core.devices import (
     ConnectionLostError,
@@ -594,14 +594,12 @@ class LMS2xx(Laser):
 
     # -- the reader thread ----------------------------------------------------------------------
     def _io_loop(self, transport: BaudTransport) -> None:
-        parser = self._parser
-        last_byte = self.clock.now()
+        reader = FrameReader(
+            self._parser, self.clock.now, (TelegramError,), self._note, INTER_BYTE_LIMIT
+        )
         while not self._stop_io.is_set():
             try:
-                # one byte with a timeout, then whatever else is there: low latency, no spin
-                data = transport.read(1, 0.02)
-                if data:
-                    data += transport.read(4096, 0.0)
+                data = reader.read(transport)
             except DeviceError as exc:
                 with self._cond:
                     self._lost = ConnectionLostError(
@@ -612,24 +610,9 @@ class LMS2xx(Laser):
                     )
                     self._cond.notify_all()
                 return
+            self.bytes_received += len(data)
             now = self.clock.now()
-            if data:
-                last_byte = now
-                self.bytes_received += len(data)
-                parser.feed(data)
-            elif parser.partial and now - last_byte > INTER_BYTE_LIMIT:
-                try:
-                    parser.expire_partial()
-                except TelegramError as exc:
-                    self._note(exc)
-            while True:
-                try:
-                    item = parser.next()
-                except TelegramError as exc:
-                    self._note(exc)
-                    continue
-                if item is None:
-                    break
+            for item in reader.frames():
                 if isinstance(item, Telegram):
                     self._dispatch(item, now)
 

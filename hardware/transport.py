@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import errno
 import termios
+from collections.abc import Callable, Iterator
 from typing import Protocol
 
 import serial
@@ -149,3 +150,74 @@ def _open_error(name: str, port: str, exc: serial.SerialException) -> DeviceErro
         text.splitlines()[0] if text else "failed",
         "check the port and the cable",
     )
+
+
+class FrameParser(Protocol):
+    """An incremental parser of a wire protocol's frames (the codecs' ``PacketParser`` and
+    ``TelegramParser``): bytes in, frames out, a frame cut off by silence given up."""
+
+    def feed(self, data: bytes) -> None: ...
+
+    @property
+    def partial(self) -> object:
+        """Truthy while a frame has begun but not ended."""
+        ...
+
+    def next(self) -> object | None:
+        """The next complete frame, or None; a garbled one raises the codec's error."""
+        ...
+
+    def expire_partial(self) -> None:
+        """Give up the frame under way (raises the codec's error describing it)."""
+        ...
+
+
+class FrameReader:
+    """A driver's reader thread's round: read what the line has, feed the parser, and hand out
+    the frames. A read waits for one byte at most ``poll`` seconds, then takes whatever else is
+    there (low latency without spinning); a frame silent for more than ``inter_byte_limit``
+    seconds mid-way is given up (the line cut it off); a frame the line garbled is passed to
+    ``note`` (drivers count them: a serial line drops one now and then) rather than raised."""
+
+    def __init__(
+        self,
+        parser: FrameParser,
+        now: Callable[[], float],
+        codec_errors: tuple[type[Exception], ...],
+        note: Callable[[Exception], None],
+        inter_byte_limit: float = 0.1,
+        poll: float = 0.02,
+    ) -> None:
+        self.parser, self.now, self.codec_errors, self.note = parser, now, codec_errors, note
+        self.inter_byte_limit, self.poll = inter_byte_limit, poll
+        self._last_byte = now()
+        self.bytes_received = 0
+
+    def read(self, transport: Transport) -> bytes:
+        """One read from the line (``DeviceError`` if it is lost); the bytes go to the parser."""
+        data = transport.read(1, self.poll)
+        if data:
+            data += transport.read(4096, 0.0)
+        now = self.now()
+        if data:
+            self._last_byte = now
+            self.bytes_received += len(data)
+            self.parser.feed(data)
+        elif self.parser.partial and now - self._last_byte > self.inter_byte_limit:
+            try:
+                self.parser.expire_partial()
+            except self.codec_errors as exc:
+                self.note(exc)
+        return data
+
+    def frames(self) -> Iterator[object]:
+        """Every complete frame the parser holds now."""
+        while True:
+            try:
+                frame = self.parser.next()
+            except self.codec_errors as exc:
+                self.note(exc)
+                continue
+            if frame is None:
+                return
+            yield frame
