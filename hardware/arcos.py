@@ -308,22 +308,11 @@ class ArcosBase(Base):
         self._require_link(f"send command {cmd}")
         self._write(command(cmd, arg))
 
-    def _read_packet(
-        self, transport: Transport, parser: PacketParser, timeout: float
-    ) -> bytes | None:
-        end = self.clock.now() + timeout
-        while True:
-            try:
-                data = parser.next()
-            except PacketError as exc:
-                self._note_error(exc)
-                continue
-            if data is not None:
-                return data
-            left = end - self.clock.now()
-            if left <= 0:
-                return None
-            parser.feed(transport.read(64, min(left, 0.05)))
+    def _frame_reader(self) -> FrameReader:
+        """A reader of the line's packets from scratch (a new parser)."""
+        return FrameReader(
+            PacketParser(), self.clock.now, (PacketError,), self._note_error, INTER_BYTE_LIMIT
+        )
 
     def _protocol_error(self, exc: PacketError) -> ProtocolError:
         return ProtocolError(self.name, exc.doing, exc.seen, exc.remedy)
@@ -337,7 +326,7 @@ class ArcosBase(Base):
     def _handshake(self, transport: Transport) -> None:
         """SYNC0, SYNC1, SYNC2 with replies echoed; any surprise restarts at SYNC0. SIPs in
         reply mean a robot still open from an earlier client: CLOSE it, wait, resync."""
-        parser = PacketParser()
+        reader = self._frame_reader()
         transport.reset_input()
         step = attempts = 0
         while step < 3:
@@ -350,7 +339,7 @@ class ArcosBase(Base):
                 )
             attempts += 1
             self._write(command(step))
-            reply = self._read_packet(transport, parser, self.reply_timeout)
+            reply = reader.next_before(transport, self.clock.now() + self.reply_timeout)
             if reply is None:
                 step = 0
             elif is_sip(reply):
@@ -358,7 +347,7 @@ class ArcosBase(Base):
                 self._write(command(Command.CLOSE, 1))
                 self.clock.sleep(0.4)
                 transport.reset_input()
-                parser = PacketParser()
+                reader = self._frame_reader()
                 step = 0
             elif reply[0] == step:
                 if step == 2:
@@ -371,9 +360,7 @@ class ArcosBase(Base):
                 step = 0
 
     def _io_loop(self, transport: Transport) -> None:
-        reader = FrameReader(
-            PacketParser(), self.clock.now, (PacketError,), self._note_error, INTER_BYTE_LIMIT
-        )
+        reader = self._frame_reader()
         while not self._stop_io.is_set():
             try:
                 reader.read(transport)

@@ -562,28 +562,12 @@ class LMS2xx(Laser):
 
     def _next_item(self, transport: Transport, deadline: float) -> Telegram | Signal | None:
         """The next telegram or ACK/NAK byte before ``deadline`` (None: none came)."""
-        parser = self._parser
-        while True:
-            try:
-                item = parser.next()
-            except TelegramError as exc:
-                self._note(exc)
-                continue
-            if item is not None:
-                return item
-            left = deadline - self.clock.now()
-            if left <= 0:
-                return None
-            data = transport.read(1, min(left, INTER_BYTE_LIMIT))
-            if data:
-                data += transport.read(4096, 0.0)
-                self.bytes_received += len(data)
-                parser.feed(data)
-            elif parser.partial:
-                try:
-                    parser.expire_partial()
-                except TelegramError as exc:
-                    self._note(exc)
+        reader = FrameReader(
+            self._parser, self.clock.now, (TelegramError,), self._note, INTER_BYTE_LIMIT
+        )
+        item = reader.next_before(transport, deadline)
+        self.bytes_received += reader.bytes_received
+        return item  # type: ignore[return-value]
 
     def _note(self, exc: LmsCodecError) -> None:
         """Count a telegram the line garbled: they happen, and the parser has resynchronised."""

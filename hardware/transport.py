@@ -193,9 +193,10 @@ class FrameReader:
         self._last_byte = now()
         self.bytes_received = 0
 
-    def read(self, transport: Transport) -> bytes:
-        """One read from the line (``DeviceError`` if it is lost); the bytes go to the parser."""
-        data = transport.read(1, self.poll)
+    def read(self, transport: Transport, wait: float | None = None) -> bytes:
+        """One read from the line, waiting at most ``wait`` seconds (default ``poll``) for its
+        first byte (``DeviceError`` if the line is lost); the bytes go to the parser."""
+        data = transport.read(1, self.poll if wait is None else wait)
         if data:
             data += transport.read(4096, 0.0)
         now = self.now()
@@ -221,3 +222,14 @@ class FrameReader:
             if frame is None:
                 return
             yield frame
+
+    def next_before(self, transport: Transport, deadline: float) -> object | None:
+        """The next frame, reading the line until ``deadline`` on the clock (None: none came);
+        for the request-and-reply exchanges before a reader thread runs."""
+        while True:
+            for frame in self.frames():
+                return frame
+            left = deadline - self.now()
+            if left <= 0:
+                return None
+            self.read(transport, min(left, self.poll))
