@@ -126,3 +126,46 @@ def test_max_range_limits_the_wedge_to_a_disc():
     assert area == pytest.approx(math.pi * 1.5**2, rel=5e-3)
     x, y = spec.cell_centers()
     assert np.all(coverage[np.hypot(x - 3.02, y - 2.97) > 1.5 + spec.cell_size] == 0.0)
+
+
+def test_visibility_weighs_each_cell_by_its_wedges_profile_at_its_distance():
+    """A wedge whose profile sees only its first metre adds nothing beyond it (and nothing to
+    the observed count there), and a half-visible band adds half."""
+    import numpy as np
+
+    from twin.core.grid import AccumulatorGrid, GridSpec
+    from twin.core.visibility import ColumnVisibility
+
+    spec = GridSpec(0.0, 0.0, 4.0, 4.0, 0.1)
+    wedge = np.array([[-0.2, 0.2]])  # looking along +x from (0.05, 2.05)
+    origin = (0.05, 2.05)
+    full = AccumulatorGrid(["a"], spec)
+    full.fuse("a", origin, wedge, np.array([1.0]))
+    seen = AccumulatorGrid(["a"], spec)
+    profile = np.zeros((1, 40))  # 0.1 m bins up to 4 m
+    profile[0, :10] = 1.0  # the first metre in view
+    profile[0, 20:25] = 0.5  # half-visible at 2.0-2.5 m
+    seen.fuse_all(origin, wedge, {"a": np.array([1.0])}, visibility=ColumnVisibility(profile, 0.1))
+    xs, ys = spec.cell_centers()
+    distance = np.hypot(xs - origin[0], ys - origin[1])
+    near, band, far = distance < 0.95, (distance > 2.05) & (distance < 2.45), distance > 2.55
+    np.testing.assert_allclose(seen.layer("a")[near], full.layer("a")[near])
+    np.testing.assert_allclose(seen.layer("a")[band], 0.5 * full.layer("a")[band])
+    assert seen.layer("a")[far].sum() == 0.0 and full.layer("a")[far].sum() > 1.0
+    np.testing.assert_allclose(seen.observed("a")[far], 0.0)
+
+
+def test_visibility_everywhere_changes_nothing():
+    import numpy as np
+
+    from twin.core.grid import AccumulatorGrid, GridSpec
+    from twin.core.visibility import ColumnVisibility
+
+    spec = GridSpec(0.0, 0.0, 3.0, 3.0, 0.1)
+    wedges = np.array([[0.1, 0.4], [0.4, 0.7], [2.0, 2.6]])
+    values = np.array([0.2, 0.9, 0.5])
+    plain, seeing = AccumulatorGrid(["a"], spec), AccumulatorGrid(["a"], spec)
+    plain.fuse("a", (1.0, 1.2), wedges, values)
+    everywhere = ColumnVisibility.everywhere(3, reach=10.0)
+    seeing.fuse_all((1.0, 1.2), wedges, {"a": values}, visibility=everywhere)
+    np.testing.assert_allclose(seeing.layer("a"), plain.layer("a"), atol=1e-12)

@@ -19,6 +19,7 @@ The kernels are compiled by numba (``cache=True``: compiled once per machine, th
 from __future__ import annotations
 
 import math
+from collections import namedtuple
 
 import numpy as np
 from numba import njit
@@ -27,6 +28,11 @@ TWO_PI = 2.0 * math.pi
 # Stand-in for the cotangent of 0 (and of pi from above): dy * _HUGE overflows nothing for any
 # |dy| the grid can see, and is clipped to the grid right after.
 _HUGE = 1e300
+# What the kernel needs to weigh a cell by its visibility to a wedge: per-wedge profiles of
+# visibility (0..1) over distance from the origin in bins of ``step`` metres (no bins: every
+# cell fully visible), the origin, and the grid's corner and cell size.
+_Seeing = namedtuple("_Seeing", "profiles step ox oy x0 y0 cell")
+NO_VISIBILITY = np.zeros((0, 0))
 
 
 @njit(cache=True, inline="always")
@@ -124,6 +130,40 @@ def _add_run(out, row: int, i_lo: int, i_hi: int, s: int, weights, w: int, scale
 
 
 @njit(cache=True)
+def _add_seen_run(out, row: int, i_lo: int, i_hi: int, s: int, weights, w: int, scale, see):
+    """``_add_run`` with each cell's share scaled by its visibility to wedge ``w``."""
+    if i_hi <= i_lo:
+        return
+    k = weights.shape[0]
+    for c in range(i_lo // s, (i_hi - 1) // s + 1):
+        count = (min(i_hi, s * (c + 1)) - max(i_lo, s * c)) * scale * _visible(see, w, row, c)
+        if count == 0.0:
+            continue
+        for q in range(k):
+            out[q, row, c] += weights[q, w] * count
+
+
+@njit(cache=True, inline="always")
+def _run(out, row, i_lo, i_hi, s, weights, w, scale, see, seeing: bool) -> None:
+    if seeing:
+        _add_seen_run(out, row, i_lo, i_hi, s, weights, w, scale, see)
+    else:
+        _add_run(out, row, i_lo, i_hi, s, weights, w, scale)
+
+
+@njit(cache=True, inline="always")
+def _visible(see, w: int, row: int, col: int) -> float:
+    """How visible cell (row, col) is to wedge ``w``: its profile at the cell centre's distance
+    from the origin (0 beyond the profile's last bin)."""
+    dx = see.x0 + (col + 0.5) * see.cell - see.ox
+    dy = see.y0 + (row + 0.5) * see.cell - see.oy
+    b = int(math.sqrt(dx * dx + dy * dy) / see.step)
+    if b >= see.profiles.shape[1]:
+        return 0.0
+    return see.profiles[w, b]
+
+
+@njit(cache=True)
 def add_coverage(
     out: np.ndarray,
     ox: float,
@@ -136,13 +176,22 @@ def add_coverage(
     cell: float,
     supersample: int,
     max_range: float,
+    visibility: np.ndarray = NO_VISIBILITY,
+    visibility_step: float = 1.0,
 ) -> None:
     """Add, for every wedge w and weight row q, ``weights[q, w] * coverage_w`` to ``out[q]``.
 
     ``out`` is (k, ny, nx), row 0 at y0; the grid's lower-left corner is (x0, y0) and its cells
     are ``cell`` metres. Coverage is the fraction (0..1) of a cell's supersample points in the
     wedge. ``max_range <= 0`` means unlimited range. Wedges are given by a0 < a1 in radians.
+
+    ``visibility`` (n_wedges, n_bins), when it has bins, scales each cell's coverage by how
+    visible the cell is to the wedge: the wedge's profile at the distance of the cell's centre
+    from the origin, in bins of ``visibility_step`` metres (0 beyond the last bin): a cell the
+    camera could not have seen an object in gains nothing, and loses nothing.
     """
+    see = _Seeing(visibility, visibility_step, ox, oy, x0, y0, cell)
+    seeing = visibility.shape[1] > 0
     ny = out.shape[1]
     nx = out.shape[2]
     s = supersample
@@ -169,9 +218,9 @@ def add_coverage(
             i_origin_hi = _first_index_after(ox, x0, step, n_cols)
             for w in range(n_wedges):
                 if _contains_angle(a0[w], a1[w], 0.0):
-                    _add_run(out, row, max(i_origin_hi, r_lo), r_hi, s, weights, w, scale)
+                    _run(out, row, max(i_origin_hi, r_lo), r_hi, s, weights, w, scale, see, seeing)
                 if _contains_angle(a0[w], a1[w], math.pi):
-                    _add_run(out, row, r_lo, min(i_origin_lo, r_hi), s, weights, w, scale)
+                    _run(out, row, r_lo, min(i_origin_lo, r_hi), s, weights, w, scale, see, seeing)
             continue
         first_slot = 0 if dy > 0.0 else 2
         for w in range(n_wedges):
@@ -188,4 +237,4 @@ def add_coverage(
                     # Bearing rises with x: the piece [b0, b1) is x in [x(b0), x(b1)).
                     i_lo = _first_index_at_or_after(ox + dy * cot_start, x0, step, n_cols)
                     i_hi = _first_index_at_or_after(ox + dy * cot_end, x0, step, n_cols)
-                _add_run(out, row, max(i_lo, r_lo), min(i_hi, r_hi), s, weights, w, scale)
+                _run(out, row, max(i_lo, r_lo), min(i_hi, r_hi), s, weights, w, scale, see, seeing)

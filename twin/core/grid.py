@@ -20,11 +20,12 @@ from pathlib import Path
 
 import numpy as np
 
-from twin.core.coverage import add_coverage
+from twin.core.coverage import NO_VISIBILITY, add_coverage
 from twin.core.errors import FileFormatError, InputError
 from twin.core.fusion import Accumulate, FusionRule, make_rule
 from twin.core.geometry import require_finite
 from twin.core.store import load_arrays, save_arrays
+from twin.core.visibility import ColumnVisibility
 
 GRID_FORMAT = "accumulator-grid"
 GRID_FORMAT_VERSION = 1
@@ -244,22 +245,30 @@ class AccumulatorGrid:
         intervals: np.ndarray,
         values: Mapping[str, np.ndarray],
         max_range: float | None = None,
+        visibility: ColumnVisibility | None = None,
     ) -> None:
         """Fuse one view into several layers with a single coverage pass.
 
         ``origin`` is the camera's (x, y) in metres; ``intervals`` an (n, 2) array of bearing
         intervals [a0, a1] (radians, map frame, a0 <= a1, at most 2 pi wide), one per patch
         column; ``values[name]`` the n column match values in [0, 1]; ``max_range`` (metres)
-        limits the wedges, which otherwise reach to the grid's edge.
+        limits the wedges, which otherwise reach to the grid's edge; ``visibility`` (one profile
+        per column) scales each cell's coverage, and its observed count, by how visible the
+        cell was to the column (none: every cell in a wedge is visible, as the paper assumes).
         """
         ox, oy, wedges, reach = self._check_view(origin, intervals, max_range)
+        if visibility is not None and visibility.profiles.shape[0] != len(wedges):
+            raise InputError(
+                f"visibility has {visibility.profiles.shape[0]} column profiles for "
+                f"{len(wedges)} wedges; give one per patch column"
+            )
         if not values:
             raise InputError("values must name at least one object")
         indices = [self._object_index(name) for name in values]
         rows = [self._check_values(name, v, len(wedges)) for name, v in values.items()]
         weights = np.stack([self.rule.column_weights(v) for v in rows] + [np.ones(len(wedges))])
         delta = np.zeros((len(weights), *self.spec.shape))
-        self._add(delta, ox, oy, wedges, weights, reach)
+        self._add(delta, ox, oy, wedges, weights, reach, visibility)
         for k, i in enumerate(indices):
             self._evidence[i] += delta[k]
             self._observed[i] += delta[-1]
@@ -317,11 +326,14 @@ class AccumulatorGrid:
                 f"unknown object {name!r}; this grid has {', '.join(self.objects)}"
             ) from None
 
-    def _add(self, out, ox, oy, wedges, weights, reach) -> None:
+    def _add(self, out, ox, oy, wedges, weights, reach, visibility=None) -> None:
+        profiles, step = (
+            (NO_VISIBILITY, 1.0) if visibility is None else (visibility.profiles, visibility.step)
+        )
         add_coverage(
             out, ox, oy, np.ascontiguousarray(wedges[:, 0]), np.ascontiguousarray(wedges[:, 1]),
             np.ascontiguousarray(weights, dtype=float), self.spec.x_min, self.spec.y_min,
-            self.spec.cell_size, self.supersample, reach,
+            self.spec.cell_size, self.supersample, reach, profiles, step,
         )  # fmt: skip
 
     @staticmethod
