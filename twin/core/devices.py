@@ -76,6 +76,9 @@ class Frame:
 
     image: np.ndarray
     timestamp: float
+    # H x W metres along each pixel's ray to the first surface (NaN: nothing within range), when
+    # the camera knows it (the twin renders it with the image); None for a real camera
+    depth: np.ndarray | None = None
 
 
 @dataclass(frozen=True)
@@ -91,6 +94,7 @@ class View:
     # 3 x 3 covariance of (x, y, yaw) in m^2 and rad^2 when the base knows it (a localizer),
     # None when it does not (bare odometry, whose error only grows)
     pose_covariance: np.ndarray | None = None
+    depth: np.ndarray | None = None  # the frame's depth, when the camera gives one (Frame.depth)
 
 
 @dataclass(frozen=True)
@@ -399,4 +403,4 @@ class Robot:
         pose = self.base.pose()
         require_finite("view pose", pose.x, pose.y, pose.yaw, pan, tilt)
         covariance = self.base.pose_covariance()
-        return View(frame.image, pose, pan, tilt, frame.timestamp, covariance)
+        return View(frame.image, pose, pan, tilt, frame.timestamp, covariance, frame.depth)
