@@ -482,12 +482,20 @@ class _SimDevice:
 
 
 class SimCamera(_SimDevice, Camera):
-    """The head camera, rendered offscreen; opens its GL context on ``connect``."""
+    """The head camera, rendered offscreen; opens its GL context on ``connect``.
+
+    Each frame carries its depth (metres along each pixel's ray, NaN where nothing is within
+    range) for the visibility model, unless ``depth`` is False: a depth pass costs another
+    render, which runs that need no visibility (or stand in for a real camera) can skip.
+    """
 
     name = "sim camera"
 
-    def __init__(self, robot: SimRobot, model: CameraModel = PAPER_CAMERA) -> None:
+    def __init__(
+        self, robot: SimRobot, model: CameraModel = PAPER_CAMERA, *, depth: bool = True
+    ) -> None:
         super().__init__(robot)
+        self.depth = depth
         fovy = float(robot.world.model.cam_fovy[robot.camera_id])
         if abs(fovy - math.degrees(model.vfov)) > 0.01:
             raise OutOfRangeError(
@@ -520,7 +528,10 @@ class SimCamera(_SimDevice, Camera):
         self.require_connected("grab a frame")
         assert self._renderer is not None
         with self.robot.lock:
-            return Frame(self._renderer.render(self.robot.world.data), self.robot.world.time)
+            data = self.robot.world.data
+            image = self._renderer.render(data)
+            depth = self._renderer.depth(data) if self.depth else None
+            return Frame(image, self.robot.world.time, depth)
 
     def now(self) -> float:
         return self.robot.world.time
