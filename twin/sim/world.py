@@ -293,10 +293,13 @@ class World:
 
     # -- placing static objects -----------------------------------------------------------------
     def surface_height(self, x: float, y: float, exclude: str | None = None) -> float:
-        """Height (m) of the first collidable surface below (x, y), cast down from 3 m."""
+        """Height (m) of the first visible surface below (x, y), cast down from 3 m: the scene's
+        collidable geoms and its decorations (a cushion on a seat, a book on a shelf), so that
+        what is placed there stands on what a camera sees, not inside it."""
         geomid = np.zeros(1, dtype=np.int32)
         body_exclude = -1 if exclude is None else self.body_id(exclude)
-        groups = np.array([1, 0, 0, 0, 0, 0], dtype=np.uint8)  # group 0: collidable things
+        # groups 0 (collidable) and 1 (decoration) are the scene; the robot's are 2 and 3
+        groups = np.array([1, 1, 0, 0, 0, 0], dtype=np.uint8)
         dist = mujoco.mj_ray(
             self.model,
             self.data,
