@@ -17,6 +17,7 @@ from typing import Any
 
 from twin.commands._args import comma_list
 from twin.core.errors import InputError
+from twin.rfch.calibration import DEFAULT_BINS
 from twin.rfch.params import VIEW_MODES, RFCHParams
 
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff")
@@ -80,7 +81,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         description="Score labelled frames and write the per-column ROC (PNG and CSV). A column "
         "is positive when one of its patches has at least --min-cover of its area on the mask, "
         "negative when none of its pixels is, and left out otherwise; its score is the maximum "
-        "over its patches. Prints AUC, the chosen threshold and its (P_fp, P_fn).",
+        "over its patches. Prints AUC, the chosen threshold and its (P_fp, P_fn), and the "
+        "score calibration: columns on and off the object per score bin and the log-likelihood "
+        "ratio each bin gives the 'calibrated' fusion rule (--store keeps it in the model).",
     )
     roc.add_argument("--model", required=True, type=Path, help="model file")
     roc.add_argument("--images", required=True, type=Path, help="directory of frames")
@@ -92,6 +95,17 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "--max-fp",
         type=float,
         help="choose the least P_fn with P_fp at most this (default: least P_fp + P_fn)",
+    )
+    roc.add_argument(
+        "--bins",
+        type=int,
+        default=DEFAULT_BINS,
+        help=f"equal score bins over [0, 1] for the calibration ({DEFAULT_BINS})",
+    )
+    roc.add_argument(
+        "--store",
+        action="store_true",
+        help="write the measured calibration into the --model file (replacing any it holds)",
     )
     roc.set_defaults(handler=_roc)
 
@@ -329,6 +343,7 @@ def _draw_detection(out: Path, image: Any, detector: Any, scores: Any) -> None:
 
 def _roc(args: argparse.Namespace) -> int:
     import io
+    from dataclasses import replace
 
     import matplotlib
 
@@ -339,10 +354,13 @@ def _roc(args: argparse.Namespace) -> int:
     from twin.app.outputs import check_output_file
     from twin.core.store import write_atomic, write_text_atomic
     from twin.rfch import RFCH
+    from twin.rfch.calibration import ScoreCalibration
     from twin.rfch.roc import column_truth, roc_curve
 
     if args.max_fp is not None and not 0.0 <= args.max_fp <= 1.0:
         raise InputError(f"--max-fp must be in [0, 1], got {args.max_fp}")
+    if args.bins < 2:
+        raise InputError(f"--bins must be at least 2, got {args.bins}")
     check_output_file(args.out, "--out")
     if args.csv is not None:
         check_output_file(args.csv, "--csv")
@@ -353,7 +371,9 @@ def _roc(args: argparse.Namespace) -> int:
         mask = read_mask(path, args.masks, image.shape)
         all_scores.append(model.scores(image).max(axis=0))
         all_truth.append(column_truth(mask, model.params.grid, args.min_cover))
-    roc = roc_curve(np.concatenate(all_scores), np.concatenate(all_truth))
+    scores, truth = np.concatenate(all_scores), np.concatenate(all_truth)
+    roc = roc_curve(scores, truth)
+    calibration = ScoreCalibration.from_columns(scores, truth, args.bins, min_cover=args.min_cover)
     threshold, p_fp, p_fn = roc.choose(args.max_fp)
     csv_path = args.csv or args.out.with_suffix(".csv")
     rows = ["threshold,p_fp,p_fn"] + [
@@ -379,5 +399,10 @@ def _roc(args: argparse.Namespace) -> int:
         f"AUC {roc.auc:.3f} over {roc.positives} positive and {roc.negatives} negative columns; "
         f"threshold {threshold:.4f} gives P_fp {p_fp:.3f}, P_fn {p_fn:.3f}"
     )
+    print(f"calibration: {calibration.describe()}")
+    print(calibration.table_text())
     print(f"wrote {args.out} and {csv_path}")
+    if args.store:
+        replace(model, calibration=calibration).save(args.model)
+        print(f"stored the calibration in {args.model}")
     return 0

@@ -15,6 +15,11 @@ A rule only chooses the per-column weight and how the two sums are read as a con
   P_fn. A column fires when its value reaches ``threshold``; a fired column adds
   log((1 - P_fn) / P_fp) to its cells, a silent one log(P_fn / (1 - P_fp)) (negative evidence).
   Rates are clamped to [``RATE_EPS``, 1 - ``RATE_EPS``] so the weights stay finite.
+* ``calibrated``: the detector's measured score distributions on and off the object
+  (``twin.rfch.calibration.ScoreCalibration``) as a table of log-likelihood ratios per score
+  bin; each column adds the LLR of its score's bin. The evidence is then the log posterior odds
+  of each cell holding the object, up to the prior (``twin.core.confidence`` reads it as a
+  probability). The table is plain numbers (``edges``, ``llr``) so that core needs no detector.
 
 ``read`` is element-wise: each output cell depends only on that cell's evidence and observed
 sums, so it accepts stacked layers of any shape (e.g. trials x checkpoints x rows x cols, as the
@@ -26,6 +31,7 @@ The paper's rule is the reference; the others are measured against it (``twin mo
 
 from __future__ import annotations
 
+import itertools
 import math
 from dataclasses import asdict, dataclass
 from typing import Any, ClassVar, Protocol
@@ -131,6 +137,52 @@ class LogOdds:
         return asdict(self)
 
 
+@dataclass(frozen=True)
+class Calibrated:
+    """Each column adds the log-likelihood ratio of its score: log p(s | on) / p(s | off).
+
+    ``edges`` (B+1 increasing numbers) bin the score; ``llr`` (B numbers, nats) is each bin's
+    ratio. Scores beyond the edges take the end bins. Evidence summed over views and columns,
+    weighted by coverage, is the log posterior odds of each cell up to the prior; read returns
+    it unchanged. No defaults: a table only means something for the detector it was measured on
+    (``ScoreCalibration.rule()`` builds this rule from a model's calibration).
+    """
+
+    name: ClassVar[str] = "calibrated"
+    edges: tuple[float, ...]
+    llr: tuple[float, ...]
+
+    def __post_init__(self) -> None:
+        # Lists come back from the grid header's JSON; keep tuples so the rule stays hashable.
+        try:
+            edges = tuple(float(e) for e in self.edges)
+            llr = tuple(float(v) for v in self.llr)
+        except (TypeError, ValueError) as exc:
+            raise InputError(f"calibrated edges and llr must be numbers: {exc}") from None
+        if len(edges) < 2 or len(llr) != len(edges) - 1:
+            raise InputError(
+                f"calibrated needs B+1 edges and B llr values, got {len(edges)} and {len(llr)}; "
+                "take both from ScoreCalibration.rule()"
+            )
+        if not all(math.isfinite(v) for v in edges + llr):
+            raise InputError("calibrated edges and llr must be finite")
+        if any(b <= a for a, b in itertools.pairwise(edges)):
+            raise InputError("calibrated edges must increase strictly")
+        object.__setattr__(self, "edges", edges)
+        object.__setattr__(self, "llr", llr)
+
+    def column_weights(self, values: np.ndarray) -> np.ndarray:
+        values = np.asarray(values, dtype=float)
+        index = np.searchsorted(np.asarray(self.edges), values, side="right") - 1
+        return np.asarray(self.llr)[np.clip(index, 0, len(self.llr) - 1)]
+
+    def read(self, evidence: np.ndarray, observed: np.ndarray) -> np.ndarray:
+        return evidence
+
+    def params(self) -> dict[str, Any]:
+        return {"edges": list(self.edges), "llr": list(self.llr)}
+
+
 def logodds_weights(p_fp: float, p_fn: float) -> tuple[float, float]:
     """(fired, silent) log-odds increments of a detector with rates clamped away from 0 and 1."""
     p_fp = min(max(p_fp, RATE_EPS), 1.0 - RATE_EPS)
@@ -138,7 +190,7 @@ def logodds_weights(p_fp: float, p_fn: float) -> tuple[float, float]:
     return math.log((1.0 - p_fn) / p_fp), math.log(p_fn / (1.0 - p_fp))
 
 
-RULES: dict[str, type] = {rule.name: rule for rule in (Accumulate, Normalized, LogOdds)}
+RULES: dict[str, type] = {rule.name: rule for rule in (Accumulate, Normalized, LogOdds, Calibrated)}
 
 
 def make_rule(name: str, **params: Any) -> FusionRule:

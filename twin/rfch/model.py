@@ -15,6 +15,7 @@ import numpy as np
 from twin.core.errors import FileFormatError, InputError, TwinError
 from twin.core.store import load_arrays, save_arrays
 from twin.rfch import kernels
+from twin.rfch.calibration import ScoreCalibration
 from twin.rfch.descriptor import check_image, check_mask, raw_descriptors, sample
 from twin.rfch.params import RFCHParams
 
@@ -33,7 +34,9 @@ class RFCH:
     scale (training mean, and colour weight / training std). ``centres`` (K×D) live in that
     space, ``radius`` (K) is α × each cluster's mean training distance (floored), and
     ``histograms`` (V×K×K) are normalized upper-triangular pair histograms: one per training
-    view (``params.views == "per_view"``) or a single merged one.
+    view (``params.views == "per_view"``) or a single merged one. ``calibration`` (optional)
+    is the measured LLR of this model's column scores (``twin.rfch.calibration``), saved in the
+    model file; files written before it existed load with none.
     """
 
     name: str
@@ -44,6 +47,7 @@ class RFCH:
     radius: np.ndarray
     histograms: np.ndarray
     summary: dict[str, Any] = field(default_factory=dict)
+    calibration: ScoreCalibration | None = None
 
     def __post_init__(self) -> None:
         if not self.name or not isinstance(self.name, str):
@@ -176,8 +180,11 @@ class RFCH:
 
     # ---------------------------------------------------------------- files
     def save(self, path: str | os.PathLike[str]) -> None:
-        """Write the model atomically as ``.npz`` + JSON header (kind ``rfch-model``, v1)."""
+        """Write the model atomically as ``.npz`` + JSON header (kind ``rfch-model``, v1); the
+        calibration, if any, is a header entry (older readers ignore it)."""
         header = {"name": self.name, "params": self.params.to_json(), "summary": self.summary}
+        if self.calibration is not None:
+            header["calibration"] = self.calibration.to_json()
         save_arrays(
             path,
             MODEL_KIND,
@@ -198,6 +205,7 @@ class RFCH:
         header, arrays = load_arrays(path, MODEL_KIND, MODEL_VERSION)
         try:
             params = RFCHParams.from_json(header["params"])
+            calibration = header.get("calibration")
             return cls(
                 name=header["name"],
                 params=params,
@@ -207,6 +215,9 @@ class RFCH:
                 radius=arrays["radius"],
                 histograms=arrays["histograms"],
                 summary=dict(header.get("summary", {})),
+                calibration=None
+                if calibration is None
+                else ScoreCalibration.from_json(calibration),
             )
         except (KeyError, TypeError, AttributeError, TwinError) as exc:
             raise FileFormatError(

@@ -1,9 +1,15 @@
-"""Training views for the detector: the target alone, rendered with exact masks.
+"""Training and calibration views for the detector, rendered with exact masks.
+
+Training (``training_views``): the target alone on the training stage.
 
 The views mimic the robot's camera: the same field of view and image size, looking at the target
 from a given horizontal range and from ``camera_drop`` metres above its centre (0.4 m: the
 robot's 1.0 m camera over a box standing on a 0.45 m coffee table). Masks come from MuJoCo's
 segmentation rendering, so they are exact to the pixel.
+
+Calibration (``calibration_views``): the target among the survey scene's clutter, as the robot's
+head camera sees it from random free-floor poses: most views miss it, some show it. These give
+the detector's score distributions on and off the object (``twin.rfch.calibration``).
 """
 
 from __future__ import annotations
@@ -15,11 +21,20 @@ import mujoco
 import numpy as np
 
 from twin.core.errors import InputError
+from twin.core.geometry import Pose2D
+from twin.sim.placement import random_surface_pose
 from twin.sim.render import FrameRenderer
+from twin.sim.robot import CAMERA_NAME, PAPER_CAMERA, SimRobot
 from twin.sim.world import World
 
 DEFAULT_DISTANCES = (1.0, 1.5, 2.0, 3.0)
 DEFAULT_ANGLES = tuple(2.0 * math.pi * k / 8 for k in range(8))
+# Placement i of calibration uses np.random.default_rng(CALIBRATION_SEED + i) (by default):
+# seeds 900_000 to 900_999 are reserved for calibration, and evaluation runs (random target
+# placements in twin.app.run / batch) must use other seeds, or the detector would be scored on
+# the very placements it was calibrated on.
+CALIBRATION_SEED = 900_000
+ROBOT_CLEARANCE = 0.35  # metres from walls and furniture: the Peoplebot's radius and a margin
 
 
 def training_views(
@@ -68,3 +83,99 @@ def training_views(
                 images.append(renderer.render(world.data, camera))
                 masks.append(np.isin(renderer.segment(world.data, camera), geoms))
     return np.stack(images), np.stack(masks)
+
+
+def calibration_views(
+    scene: str = "living_room",
+    target: str | None = None,
+    n_placements: int = 12,
+    views_per_placement: int = 16,
+    seed: int = CALIBRATION_SEED,
+    aimed_fraction: float = 0.25,
+    min_distance: float = 0.6,
+    width: int = PAPER_CAMERA.width,
+    height: int = PAPER_CAMERA.height,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Head-camera frames of ``scene`` with the target at random furniture tops, and its masks.
+
+    For each placement i (``rng = np.random.default_rng(seed + i)``; keep ``seed`` in the
+    reserved range, see ``CALIBRATION_SEED``) the target moves to a random level furniture top
+    (``random_surface_pose``), then the robot stands at ``views_per_placement`` random free
+    floor poses (``ROBOT_CLEARANCE`` m from walls and furniture, at least ``min_distance`` m
+    from the target) with its head level and straight, so the camera is at its 1 m height.
+    A share ``aimed_fraction`` of the views face the target give or take half the field of
+    view (so it lands anywhere across the frame, or is hidden behind furniture); the others
+    face a uniformly random direction and mostly miss it, as most survey views do.
+
+    Returns ``images`` (N, H, W, 3) uint8 RGB and ``masks`` (N, H, W) bool (the target's
+    pixels, from segmentation), N = n_placements x views_per_placement, placement-major.
+    """
+    if n_placements < 1 or views_per_placement < 1:
+        raise InputError(
+            f"calibration needs at least one placement and view, got {n_placements} "
+            f"placements x {views_per_placement} views"
+        )
+    if not 0.0 <= aimed_fraction <= 1.0:
+        raise InputError(f"aimed_fraction must be in [0, 1], got {aimed_fraction!r}")
+    world = World(scene)
+    target = target or (world.targets() or (None,))[0]
+    if target is None:
+        raise InputError(f"scene {world.path.name} declares no target; pass target=")
+    geoms = np.flatnonzero(world.model.geom_bodyid == world.body_id(target))
+    robot = SimRobot(world)
+    obstacles = [world.footprint(name).polygon for name in world.furniture()]
+    half_fov = 0.5 * PAPER_CAMERA.hfov
+    aimed = round(aimed_fraction * views_per_placement)
+    images, masks = [], []
+    with FrameRenderer(world.model, width, height, CAMERA_NAME) as renderer:
+        for i in range(n_placements):
+            rng = np.random.default_rng(seed + i)
+            spot = random_surface_pose(world, target, rng)
+            for k in range(views_per_placement):
+                x, y = _free_floor_point(world, obstacles, (spot.x, spot.y), min_distance, rng)
+                if k < aimed:
+                    yaw = math.atan2(spot.y - y, spot.x - x) + rng.uniform(-half_fov, half_fov)
+                else:
+                    yaw = rng.uniform(-math.pi, math.pi)
+                # No settling: only the pose matters for a frame, and physics would cost time.
+                robot.place(Pose2D(x, y, float(yaw)), settle=0.0)
+                images.append(renderer.render(world.data))
+                masks.append(np.isin(renderer.segment(world.data), geoms))
+    return np.stack(images), np.stack(masks)
+
+
+def _free_floor_point(
+    world: World,
+    obstacles: list[np.ndarray],
+    target: tuple[float, float],
+    min_distance: float,
+    rng: np.random.Generator,
+) -> tuple[float, float]:
+    """A uniformly random (x, y) in metres where the robot can stand, away from the target.
+
+    ``obstacles`` are the furniture footprints (convex, counter-clockwise), computed once: the
+    same test as ``World.check_free``, which recomputes them at every call (half the time of
+    rendering the views).
+    """
+    xmin, ymin, xmax, ymax = world.room_bounds()
+    c = ROBOT_CLEARANCE
+    for _ in range(2000):
+        x, y = float(rng.uniform(xmin + c, xmax - c)), float(rng.uniform(ymin + c, ymax - c))
+        if math.dist((x, y), target) < min_distance:
+            continue
+        if all(_clear_of(np.array([x, y]), polygon, c) for polygon in obstacles):
+            return x, y
+    raise InputError(
+        f"found no free floor point {c} m from the furniture and {min_distance} m "
+        f"from the target in {world.path.name}; lower min_distance"
+    )
+
+
+def _clear_of(point: np.ndarray, polygon: np.ndarray, clearance: float) -> bool:
+    """Whether ``point`` lies outside the convex CCW ``polygon`` by at least ``clearance`` m."""
+    a, b = polygon, np.roll(polygon, -1, axis=0)
+    edge, rel = b - a, point - a
+    if np.all(edge[:, 0] * rel[:, 1] - edge[:, 1] * rel[:, 0] >= 0.0):
+        return False  # inside
+    t = np.clip(np.einsum("ij,ij->i", rel, edge) / np.einsum("ij,ij->i", edge, edge), 0.0, 1.0)
+    return bool(np.min(np.linalg.norm(rel - t[:, None] * edge, axis=1)) >= clearance)
