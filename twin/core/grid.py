@@ -8,27 +8,48 @@ crossed only incidentally stay low; ``peaks`` reads the maxima back in metres.
 
 Layers are indexed [row, col] with row 0 at ``y_min`` (map y up); cell (row, col) spans
 x in [x_min + col c, x_min + (col + 1) c), y likewise, with c the cell size in metres.
+
+Viewpoint bias (paper, Section 4): a cell seen again and again from the same direction gains
+evidence just for being seen often, so with several views per stop the paper's sum parks its
+estimate where views overlap; and repeated views from one direction are not independent
+evidence, which makes probabilistic sums overconfident. With ``direction_bins`` B > 1 the grid
+files every view's contribution to a cell under the direction from the cell to the camera (B
+equal sectors of 2 pi / B, ``direction_bin``), and reads each sector as at most one full view:
+its mean weight if it was seen at least once in full, its partial sum otherwise. The rule then
+reads the sum over sectors, so a cell seen from many directions still gains (triangulation) and
+one seen many times from one direction does not. B = 1 is the paper's grid, unchanged.
 """
 
 from __future__ import annotations
 
+import json
 import math
 import os
+import zipfile
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+from numba import njit
 
 from twin.core.coverage import NO_VISIBILITY, add_coverage
 from twin.core.errors import FileFormatError, InputError
 from twin.core.fusion import Accumulate, FusionRule, make_rule
 from twin.core.geometry import require_finite
-from twin.core.store import load_arrays, save_arrays
+
+# The header's array name is the store's; the grid peeks at it to pick which version to load.
+from twin.core.store import _HEADER_KEY, load_arrays, save_arrays
 from twin.core.visibility import ColumnVisibility
 
 GRID_FORMAT = "accumulator-grid"
-GRID_FORMAT_VERSION = 1
+# Version 2 stores the per-direction sums (direction_bins > 1); a grid of one direction bin is
+# still written as version 1, byte for byte the arrays older versions of twin wrote and read.
+GRID_FORMAT_VERSION = 2
+GRID_FORMAT_VERSIONS = (1, 2)
+# Each bin is a full copy of a layer's two sums per object, so memory grows with B; 64 sectors
+# (5.6 degrees each) is already finer than a camera's pose is known.
+MAX_DIRECTION_BINS = 64
 
 Prior = float | np.ndarray | Callable[[np.ndarray, np.ndarray], np.ndarray]
 
@@ -119,6 +140,53 @@ class Peaks:
         return self.peaks[0].value / self.peaks[1].value
 
 
+def direction_bin(dx: np.ndarray, dy: np.ndarray, bins: int) -> np.ndarray:
+    """The direction sector (0 .. bins - 1) of each vector (dx, dy), in metres.
+
+    Sector b is the half-open bearing interval of width 2 pi / bins centred on b 2 pi / bins
+    (counter-clockwise from +x): with 4 bins, 0 is east, 1 north, 2 west, 3 south. Centring
+    the sectors puts the compass directions, along which views are often taken, mid-sector
+    rather than on a boundary. A zero vector falls in sector 0. The grid bins each cell by the
+    vector from its centre to the camera.
+    """
+    x, y = np.broadcast_arrays(np.asarray(dx, dtype=float), np.asarray(dy, dtype=float))
+    out = np.empty(x.size, dtype=np.intp)
+    _sectors(np.ravel(x), np.ravel(y), int(bins), out)
+    return out.reshape(x.shape)
+
+
+@njit(cache=True, inline="always")
+def _sector(dx: float, dy: float, bins: int) -> int:
+    # One definition for ``direction_bin`` and the scatter, so they bin boundaries alike.
+    return math.floor(math.atan2(dy, dx) * bins / (2.0 * math.pi) + 0.5) % bins
+
+
+@njit(cache=True)
+def _sectors(dx, dy, bins, out) -> None:
+    for k in range(dx.shape[0]):
+        out[k] = _sector(dx[k], dy[k], bins)
+
+
+@njit(cache=True)
+def _scatter_by_direction(evidence, observed, objects, delta, ox, oy, x0, y0, cell) -> None:
+    """Add one view's (K + 1, ny, nx) ``delta`` (K objects' evidence, then the coverage) to the
+    (objects, bins, ny, nx) sums of ``objects``, each cell in the bin of its direction to the
+    camera at (ox, oy); the grid's corner (x0, y0) and cell size are in metres. One pass over
+    the cells: the bins are found only for cells the view saw, and nothing is allocated."""
+    bins = evidence.shape[1]
+    k = objects.shape[0]
+    for r in range(delta.shape[1]):
+        dy = oy - (y0 + (r + 0.5) * cell)
+        for c in range(delta.shape[2]):
+            seen = delta[k, r, c]
+            if seen == 0.0:
+                continue  # no coverage, so no evidence either
+            b = _sector(ox - (x0 + (c + 0.5) * cell), dy, bins)
+            for q in range(k):
+                evidence[objects[q], b, r, c] += delta[q, r, c]
+                observed[objects[q], b, r, c] += seen
+
+
 def local_maxima(values: np.ndarray, k: int, separation: int = 1) -> list[tuple[int, int]]:
     """(row, col) of the ``k`` largest local maxima, at least ``separation + 1`` cells apart.
 
@@ -151,6 +219,11 @@ class AccumulatorGrid:
     ``accumulate``); ``supersample`` is the sub-cells per cell side used for coverage (the
     paper's 10); ``prior`` sets the initial evidence: a number, an (ny, nx) array, a function
     of the cell-centre arrays (X, Y) in metres, or a mapping from object name to any of these.
+
+    ``direction_bins`` (B, 1 .. 64) corrects viewpoint bias (see the module docstring): with
+    B > 1 the sums are kept per direction sector from the cell to the camera and each sector
+    counts at most as one full view. B = 1 (the default) is the paper's grid exactly. The prior
+    is added once to the corrected evidence, not averaged with the views.
     """
 
     def __init__(
@@ -160,6 +233,7 @@ class AccumulatorGrid:
         rule: FusionRule | None = None,
         supersample: int = 10,
         prior: Prior | Mapping[str, Prior] | None = None,
+        direction_bins: int = 1,
     ) -> None:
         names = list(objects)
         if not names:
@@ -168,30 +242,80 @@ class AccumulatorGrid:
             raise InputError(f"object names must be distinct non-empty strings, got {names!r}")
         if not isinstance(supersample, int | np.integer) or supersample < 1:
             raise InputError(f"supersample must be a positive integer, got {supersample!r}")
+        if (
+            not isinstance(direction_bins, int | np.integer)
+            or isinstance(direction_bins, bool)
+            or not 1 <= direction_bins <= MAX_DIRECTION_BINS
+        ):
+            raise InputError(
+                f"direction_bins must be an integer from 1 to {MAX_DIRECTION_BINS} "
+                f"(1: no viewpoint correction), got {direction_bins!r}"
+            )
         self.spec = spec
         self.objects: tuple[str, ...] = tuple(names)
         self.rule: FusionRule = rule if rule is not None else Accumulate()
         self.supersample = int(supersample)
+        self.direction_bins = int(direction_bins)
         self._index = {name: i for i, name in enumerate(names)}
-        shape = (len(names), *spec.shape)
+        # Sums per (object, direction bin, row, col). With one bin the prior starts bin 0's
+        # evidence, as it always did; with more it is kept apart, since the correction divides
+        # each bin's evidence by how often the bin was seen and the prior was never seen.
+        shape = (len(names), self.direction_bins, *spec.shape)
         self._evidence = np.zeros(shape)
         self._observed = np.zeros(shape)
+        self._prior = np.zeros((len(names), *spec.shape))
         self._views = np.zeros(len(names), dtype=np.int64)
         if prior is not None:
             for name in names:
-                self._evidence[self._index[name]] = self._prior_layer(name, prior)
+                i = self._index[name]
+                layer = self._prior_layer(name, prior)
+                if self.direction_bins == 1:
+                    self._evidence[i, 0] = layer
+                else:
+                    self._prior[i] = layer
 
     # -- reading -------------------------------------------------------------------------
 
     def layer(self, name: str) -> np.ndarray:
-        """The confidence map of ``name`` as the rule reads it (a new (ny, nx) array)."""
-        i = self._object_index(name)
-        return np.array(self.rule.read(self._evidence[i], self._observed[i]))
+        """The confidence map of ``name`` as the rule reads it (a new (ny, nx) array).
+
+        The rule reads ``evidence(name)`` and ``observed(name)``: with direction bins, the sums
+        corrected for viewpoint bias.
+        """
+        return np.array(self.rule.read(*self._sums(self._object_index(name))))
 
     def evidence(self, name: str) -> np.ndarray:
-        return self._evidence[self._object_index(name)].copy()
+        """``name``'s evidence sum per cell (a new (ny, nx) array), in the rule's weight units.
+
+        With one direction bin: prior + sum over views of weight x coverage. With B > 1: prior
+        + sum over bins b of evidence_b / max(observed_b, 1), i.e. each direction's mean
+        weight, or its partial sum if that direction has seen less than one full cell.
+        """
+        return np.array(self._sums(self._object_index(name))[0])
 
     def observed(self, name: str) -> np.ndarray:
+        """How much each cell of ``name`` has been seen (a new (ny, nx) array), in full-cell views.
+
+        With one direction bin: the sum of coverage over views. With B > 1: the sum over bins
+        of min(observed_b, 1), i.e. the number of directions that saw the cell, each counting
+        at most one full view.
+        """
+        return np.array(self._sums(self._object_index(name))[1])
+
+    def evidence_by_direction(self, name: str) -> np.ndarray:
+        """The raw per-direction evidence sums of ``name``: a new (B, ny, nx) array.
+
+        Bin b holds sum of weight x coverage over the views whose camera lay in sector b seen
+        from the cell (``direction_bin``). With B > 1 the prior is not included; with one bin it
+        is, as in the version-1 file.
+        """
+        return self._evidence[self._object_index(name)].copy()
+
+    def observed_by_direction(self, name: str) -> np.ndarray:
+        """The raw per-direction coverage sums of ``name``: a new (B, ny, nx) array.
+
+        In full-cell views; bin b as in ``evidence_by_direction``.
+        """
         return self._observed[self._object_index(name)].copy()
 
     def views(self, name: str) -> int:
@@ -255,6 +379,9 @@ class AccumulatorGrid:
         limits the wedges, which otherwise reach to the grid's edge; ``visibility`` (one profile
         per column) scales each cell's coverage, and its observed count, by how visible the
         cell was to the column (none: every cell in a wedge is visible, as the paper assumes).
+
+        With direction bins each cell's share goes to the bin of the direction from the cell's
+        centre to ``origin``; the coverage pass is the same single pass either way.
         """
         ox, oy, wedges, reach = self._check_view(origin, intervals, max_range)
         if visibility is not None and visibility.profiles.shape[0] != len(wedges):
@@ -269,15 +396,28 @@ class AccumulatorGrid:
         weights = np.stack([self.rule.column_weights(v) for v in rows] + [np.ones(len(wedges))])
         delta = np.zeros((len(weights), *self.spec.shape))
         self._add(delta, ox, oy, wedges, weights, reach, visibility)
-        for k, i in enumerate(indices):
-            self._evidence[i] += delta[k]
-            self._observed[i] += delta[-1]
-            self._views[i] += 1
+        if self.direction_bins == 1:
+            for k, i in enumerate(indices):
+                self._evidence[i, 0] += delta[k]
+                self._observed[i, 0] += delta[-1]
+                self._views[i] += 1
+            return
+        objects = np.array(indices, dtype=np.intp)
+        _scatter_by_direction(
+            self._evidence, self._observed, objects, delta, ox, oy,
+            self.spec.x_min, self.spec.y_min, self.spec.cell_size,
+        )  # fmt: skip
+        self._views[objects] += 1
 
     # -- files ---------------------------------------------------------------------------
 
     def save(self, path: str | os.PathLike[str]) -> Path:
-        """Write the grid atomically as ``.npz`` with a JSON header (format version 1)."""
+        """Write the grid atomically as ``.npz`` with a JSON header.
+
+        A grid of one direction bin is written in format version 1 (the arrays older versions
+        of twin read); one of B > 1 bins in version 2, which adds ``direction_bins`` to the
+        header, keeps (objects, B, ny, nx) sums and the prior apart as (objects, ny, nx).
+        """
         header = {
             "extent": [self.spec.x_min, self.spec.y_min, self.spec.x_max, self.spec.y_max],
             "cell_size": self.spec.cell_size,
@@ -285,13 +425,34 @@ class AccumulatorGrid:
             "objects": list(self.objects),
             "rule": {"name": self.rule.name, **self.rule.params()},
         }
-        arrays = {"evidence": self._evidence, "observed": self._observed, "views": self._views}
+        if self.direction_bins == 1:
+            arrays = {
+                "evidence": self._evidence[:, 0],
+                "observed": self._observed[:, 0],
+                "views": self._views,
+            }
+            return save_arrays(path, GRID_FORMAT, 1, header, arrays)
+        header["direction_bins"] = self.direction_bins
+        arrays = {
+            "evidence": self._evidence,
+            "observed": self._observed,
+            "prior": self._prior,
+            "views": self._views,
+        }
         return save_arrays(path, GRID_FORMAT, GRID_FORMAT_VERSION, header, arrays)
 
     @classmethod
     def load(cls, path: str | os.PathLike[str]) -> AccumulatorGrid:
-        """Read a grid written by ``save``; any defect is a one-line ``FileFormatError``."""
-        header, arrays = load_arrays(path, GRID_FORMAT, GRID_FORMAT_VERSION)
+        """Read a grid written by ``save`` (format version 1 or 2).
+
+        A version-1 file is a grid of one direction bin. Any defect is a one-line
+        ``FileFormatError``.
+        """
+        version = _stored_version(path)
+        # JSON's true and 1.0 equal 1 in Python; only a true integer picks the reader.
+        if type(version) is not int or version not in GRID_FORMAT_VERSIONS:
+            version = GRID_FORMAT_VERSION  # so that load_arrays names the defect
+        header, arrays = load_arrays(path, GRID_FORMAT, version)
         try:
             spec = GridSpec(*header["extent"], header["cell_size"])
             rule_spec = dict(header["rule"])
@@ -300,19 +461,40 @@ class AccumulatorGrid:
                 spec,
                 make_rule(rule_spec.pop("name"), **rule_spec),
                 int(header["supersample"]),
+                direction_bins=header["direction_bins"] if version >= 2 else 1,
             )
-            expected = (len(grid.objects), *spec.shape)
-            evidence, observed, views = arrays["evidence"], arrays["observed"], arrays["views"]
+            n = len(grid.objects)
+            bins = grid.direction_bins
+            evidence = np.asarray(arrays["evidence"], dtype=float)
+            observed = np.asarray(arrays["observed"], dtype=float)
+            views = np.asarray(arrays["views"])
+            if version == 1:
+                evidence, observed = evidence[:, None], observed[:, None]
+                prior = np.zeros((n, *spec.shape))
+            else:
+                prior = np.asarray(arrays["prior"], dtype=float)
+            expected = (n, bins, *spec.shape)
             if evidence.shape != expected or observed.shape != expected:
                 raise ValueError(f"layer arrays are not of shape {expected}")
-            if views.shape != (len(grid.objects),):
+            if prior.shape != (n, *spec.shape):
+                raise ValueError(f"the prior is not of shape {(n, *spec.shape)}")
+            if views.shape != (n,) or not np.issubdtype(views.dtype, np.integer):
                 raise ValueError("the view counts do not match the objects")
-        except (KeyError, TypeError, ValueError, InputError) as exc:
+            if not (np.all(np.isfinite(evidence)) and np.all(np.isfinite(prior))):
+                raise ValueError("the evidence is not finite")
+            if not (np.all(np.isfinite(observed)) and np.all(observed >= 0.0)):
+                raise ValueError("the observed counts are not finite and non-negative")
+        except (KeyError, TypeError, ValueError, IndexError, InputError) as exc:
             raise FileFormatError(
                 f"{path}: grid file is inconsistent ({exc}); re-create it"
             ) from exc
-        grid._evidence = evidence.astype(float)
-        grid._observed = observed.astype(float)
+        if version >= 2 and bins == 1:
+            # One bin keeps its prior in the evidence, as version 1 does.
+            evidence = evidence + prior[:, None]
+            prior = np.zeros_like(prior)
+        grid._evidence = np.ascontiguousarray(evidence)
+        grid._observed = np.ascontiguousarray(observed)
+        grid._prior = np.ascontiguousarray(prior)
         grid._views = views.astype(np.int64)
         return grid
 
@@ -325,6 +507,17 @@ class AccumulatorGrid:
             raise InputError(
                 f"unknown object {name!r}; this grid has {', '.join(self.objects)}"
             ) from None
+
+    def _sums(self, i: int) -> tuple[np.ndarray, np.ndarray]:
+        """Object ``i``'s (evidence, observed) as the rule reads them: corrected with bins."""
+        if self.direction_bins == 1:
+            return self._evidence[i, 0], self._observed[i, 0]
+        seen = self._observed[i]
+        # A bin seen at least once in full gives its mean weight and counts as one view; a bin
+        # seen less keeps its partial sums, so a glancing view stays a glancing view. (Memory
+        # bound: 2 B layers are read; measured no faster as a compiled single pass.)
+        evidence = self._evidence[i] / np.maximum(seen, 1.0)
+        return self._prior[i] + evidence.sum(axis=0), np.minimum(seen, 1.0).sum(axis=0)
 
     def _add(self, out, ox, oy, wedges, weights, reach, visibility=None) -> None:
         profiles, step = (
@@ -386,3 +579,16 @@ class AccumulatorGrid:
         if not np.all(np.isfinite(layer)):
             raise InputError(f"prior for {name!r} must be finite")
         return layer
+
+
+def _stored_version(path: str | os.PathLike[str]) -> object:
+    """The format version in a grid file's header, or None if it cannot be read.
+
+    Only the small header member is decompressed; ``load_arrays`` then reports any defect.
+    """
+    try:
+        with np.load(path, allow_pickle=False) as archive:
+            header = json.loads(archive[_HEADER_KEY].tobytes().decode("utf-8"))
+        return header.get("version")
+    except (OSError, ValueError, KeyError, TypeError, AttributeError, EOFError, zipfile.BadZipFile):
+        return None
