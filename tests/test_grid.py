@@ -489,3 +489,34 @@ def test_bad_direction_bins_is_a_one_line_error(bins):
     ) as caught:
         small_grid(direction_bins=bins)
     assert "\n" not in str(caught.value)
+
+
+def test_each_object_may_have_its_own_rule_parameters(tmp_path) -> None:
+    # Two calibrated detectors: the same column value is strong evidence for one, weak for
+    # the other; each layer must get its own model's log-likelihood ratio.
+    edges = (0.0, 0.5, 1.0)
+    rules = {
+        "box": make_rule("calibrated", edges=edges, llr=(-1.0, 2.0)),
+        "cup": make_rule("calibrated", edges=edges, llr=(-0.5, 0.5)),
+    }
+    spec = GridSpec(0.0, 0.0, 2.0, 2.0, 0.1)
+    grid = AccumulatorGrid(["box", "cup"], spec, rules, 4)
+    wedges = np.array([[-0.1, 0.1]])
+    grid.fuse_all((0.05, 1.0), wedges, {"box": np.array([0.8]), "cup": np.array([0.8])})
+    row, col = 10, 10  # on the wedge's axis
+    seen = grid.observed("box")[row, col]
+    assert seen > 0
+    assert grid.layer("box")[row, col] == pytest.approx(2.0 * seen)
+    assert grid.layer("cup")[row, col] == pytest.approx(0.5 * seen)
+    grid.save(tmp_path / "g.npz")
+    loaded = AccumulatorGrid.load(tmp_path / "g.npz")
+    assert loaded.rules == grid.rules
+    np.testing.assert_array_equal(loaded.layer("cup"), grid.layer("cup"))
+
+
+def test_rules_per_object_must_cover_every_object_and_be_of_one_kind() -> None:
+    spec = GridSpec(0.0, 0.0, 1.0, 1.0, 0.1)
+    with pytest.raises(InputError, match="one fusion rule per object"):
+        AccumulatorGrid(["box", "cup"], spec, {"box": Accumulate()})
+    with pytest.raises(InputError, match="one kind"):
+        AccumulatorGrid(["box", "cup"], spec, {"box": Accumulate(), "cup": Normalized()})

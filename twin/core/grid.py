@@ -230,7 +230,7 @@ class AccumulatorGrid:
         self,
         objects: Sequence[str],
         spec: GridSpec,
-        rule: FusionRule | None = None,
+        rule: FusionRule | Mapping[str, FusionRule] | None = None,
         supersample: int = 10,
         prior: Prior | Mapping[str, Prior] | None = None,
         direction_bins: int = 1,
@@ -253,7 +253,7 @@ class AccumulatorGrid:
             )
         self.spec = spec
         self.objects: tuple[str, ...] = tuple(names)
-        self.rule: FusionRule = rule if rule is not None else Accumulate()
+        self.rules = _rules_per_object(names, rule)
         self.supersample = int(supersample)
         self.direction_bins = int(direction_bins)
         self._index = {name: i for i, name in enumerate(names)}
@@ -276,13 +276,19 @@ class AccumulatorGrid:
 
     # -- reading -------------------------------------------------------------------------
 
+    @property
+    def rule(self) -> FusionRule:
+        """The grid's rule: the first object's (every object's rule is of the same kind, with
+        parameters of its own where a detector calibrates each object apart)."""
+        return self.rules[self.objects[0]]
+
     def layer(self, name: str) -> np.ndarray:
         """The confidence map of ``name`` as the rule reads it (a new (ny, nx) array).
 
         The rule reads ``evidence(name)`` and ``observed(name)``: with direction bins, the sums
         corrected for viewpoint bias.
         """
-        return np.array(self.rule.read(*self._sums(self._object_index(name))))
+        return np.array(self.rules[name].read(*self._sums(self._object_index(name))))
 
     def evidence(self, name: str) -> np.ndarray:
         """``name``'s evidence sum per cell (a new (ny, nx) array), in the rule's weight units.
@@ -393,7 +399,10 @@ class AccumulatorGrid:
             raise InputError("values must name at least one object")
         indices = [self._object_index(name) for name in values]
         rows = [self._check_values(name, v, len(wedges)) for name, v in values.items()]
-        weights = np.stack([self.rule.column_weights(v) for v in rows] + [np.ones(len(wedges))])
+        weights = np.stack(
+            [self.rules[name].column_weights(v) for name, v in zip(values, rows, strict=True)]
+            + [np.ones(len(wedges))]
+        )
         delta = np.zeros((len(weights), *self.spec.shape))
         self._add(delta, ox, oy, wedges, weights, reach, visibility)
         if self.direction_bins == 1:
@@ -425,6 +434,10 @@ class AccumulatorGrid:
             "objects": list(self.objects),
             "rule": {"name": self.rule.name, **self.rule.params()},
         }
+        if any(self.rules[name] != self.rule for name in self.objects):
+            header["rules"] = {
+                name: {"name": rule.name, **rule.params()} for name, rule in self.rules.items()
+            }
         if self.direction_bins == 1:
             arrays = {
                 "evidence": self._evidence[:, 0],
@@ -455,11 +468,15 @@ class AccumulatorGrid:
         header, arrays = load_arrays(path, GRID_FORMAT, version)
         try:
             spec = GridSpec(*header["extent"], header["cell_size"])
-            rule_spec = dict(header["rule"])
+            specs = header.get("rules") or dict.fromkeys(header["objects"], header["rule"])
+            rules = {}
+            for name, rule_spec in specs.items():
+                params = dict(rule_spec)
+                rules[name] = make_rule(params.pop("name"), **params)
             grid = cls(
                 header["objects"],
                 spec,
-                make_rule(rule_spec.pop("name"), **rule_spec),
+                rules,
                 int(header["supersample"]),
                 direction_bins=header["direction_bins"] if version >= 2 else 1,
             )
@@ -592,3 +609,25 @@ def _stored_version(path: str | os.PathLike[str]) -> object:
         return header.get("version")
     except (OSError, ValueError, KeyError, TypeError, AttributeError, EOFError, zipfile.BadZipFile):
         return None
+
+
+def _rules_per_object(
+    names: list[str], rule: FusionRule | Mapping[str, FusionRule] | None
+) -> dict[str, FusionRule]:
+    """One rule for every object, or one per object (all of one kind: a grid reads all its
+    layers the same way, e.g. the calibrated rule with each model's own likelihood ratios)."""
+    if rule is None or not isinstance(rule, Mapping):
+        shared = rule if rule is not None else Accumulate()
+        return dict.fromkeys(names, shared)
+    missing = [name for name in names if name not in rule]
+    if missing or len(rule) != len(names):
+        raise InputError(
+            f"give one fusion rule per object: the grid holds {names}, the rules name "
+            f"{sorted(rule)}"
+        )
+    kinds = {rule[name].name for name in names}
+    if len(kinds) != 1:
+        raise InputError(
+            f"a grid's objects must share one kind of fusion rule, got {sorted(kinds)}"
+        )
+    return {name: rule[name] for name in names}
