@@ -202,8 +202,20 @@ class MissionWorld:
         self.start = context.start
         self.targets = {o.name: o.body for o in config.objects if o.body is not None}
         quiet = lambda _: None  # noqa: E731 - the detector is trained before workers start
-        self.detector = prepare_detector(config.objects, config.detector, config.cache, quiet)
+        self.detector = prepare_detector(
+            config.objects,
+            config.detector,
+            config.cache,
+            quiet,
+            calibration_scene=str(config.scene),
+        )
         self.robot.connect()
+        from twin.app.visibility_models import build_visibility
+
+        occupancy = getattr(self.robot.base, "map", None)
+        self.visibility = build_visibility(
+            config, self.sim.world, self.robot.camera.model, occupancy
+        )
 
     def reset(self, spec: BatchSpec, draw: MissionDraw) -> dict[str, str]:
         """Put the world in run ``draw``'s state; returns the furniture each target stands on."""
@@ -240,8 +252,8 @@ class MissionWorld:
 def run_batch_mission(spec: BatchSpec, run: int) -> dict[str, Any]:
     """One randomized mission (the task a worker runs); returns its JSON-ready result."""
     from twin.app.mission import Mission
+    from twin.app.run import make_grids
     from twin.app.survey import plan_views, run_survey
-    from twin.core.grid import AccumulatorGrid
 
     started = time.perf_counter()
     key = repr(sorted(spec.identity().items())) + spec.config_folder + spec.working_dir
@@ -249,8 +261,7 @@ def run_batch_mission(spec: BatchSpec, run: int) -> dict[str, Any]:
     config = world.config
     draw = draw_mission(spec, run)
     surfaces = world.reset(spec, draw)
-    names = [o.name for o in config.objects]
-    grid = AccumulatorGrid(names, config.grid.spec, config.grid.rule, config.grid.supersample)
+    grid, belief = make_grids(config, world.detector)
     sim = world.sim
     truth = {
         name: tuple(float(v) for v in sim.world.body_position(body))
@@ -263,6 +274,9 @@ def run_batch_mission(spec: BatchSpec, run: int) -> dict[str, Any]:
         max_range=config.grid.max_range,
         truth=truth,
         truth_pose=sim.truth_pose,
+        visibility=world.visibility,
+        belief=belief,
+        confidence_options=config.confidence,
     )
     setup = time.perf_counter() - started
     run_survey(mission, plan_views(config.mission, world.robot.pantilt.limits))
@@ -313,7 +327,9 @@ def prepare(spec: BatchSpec, say: Callable[[str], None] = print) -> None:
     from twin.app.detection import prepare_detector
 
     config = spec.load()
-    prepare_detector(config.objects, config.detector, config.cache, say)
+    prepare_detector(
+        config.objects, config.detector, config.cache, say, calibration_scene=str(config.scene)
+    )
 
 
 def run_batch(

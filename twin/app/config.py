@@ -19,7 +19,7 @@ import tomllib
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 from twin.app.device_types import OPTIONAL_ROLES, ROLES, device_type, types_of
 from twin.core.errors import InputError
@@ -29,6 +29,9 @@ from twin.core.options import OptionError, option, parse_options
 from twin.resources import scenes_dir
 
 DEFAULT_CONFIG_NAME = "living_room_survey.toml"
+# The confidence's temperature, fitted on development runs (benchmarks/fusion_generality.py
+# --fit-temperature on seeds no reported figure uses; README "How sure is it?").
+TEMPERATURE = 1.0
 RERUN_MODES = ("save", "spawn", "serve", "off")
 DEVICE_ROLES = ROLES
 TWIN_PORT = "twin"  # a serial device's port that names its serial twin (an emulator on a pty)
@@ -69,11 +72,54 @@ class MissionConfig:
 
 @dataclass(frozen=True)
 class GridConfig:
+    """``[grid]``. ``rule`` is None for ``fusion = "calibrated"``: that rule's log-likelihood
+    ratios come with the detector's model, so it is made once the models are loaded."""
+
     spec: GridSpec
     supersample: int
-    rule: FusionRule
+    rule: FusionRule | None
     max_range: float | None
     peak_separation: float = 0.5  # metres between distinct hypotheses (see AccumulatorGrid.peaks)
+    fusion: str = "accumulate"
+    direction_bins: int = 1  # viewpoint-bias correction: directions a cell's evidence is kept in
+
+
+@dataclass(frozen=True)
+class VisibilityOptions:
+    """``[visibility]``: which cells a wedge may credit or penalise
+    (``twin.app.visibility_models``)."""
+
+    source: Literal["auto", "depth", "model", "map", "none"] = option(
+        "auto",
+        doc='where the depth comes from: "depth" the frame\'s own (the twin\'s camera), "model" '
+        'the scene rendered at the localized pose, "map" the laser map; "auto" the first the '
+        'robot has; "none" every cell in a wedge is seen (the paper)',
+    )
+    supports: Literal["model", "anywhere"] = option(
+        "model",
+        doc='where an object may stand: "model" on the scene\'s surfaces (floor, tops, shelves), '
+        '"anywhere" at any height up to 2 m',
+    )
+    object_height_m: float = option(
+        0.2, unit="m", low=0.02, high=2.0, doc="how tall the smallest sought object is"
+    )
+
+
+@dataclass(frozen=True)
+class ConfidenceOptions:
+    """``[confidence]``: how each estimate's confidence is read (``twin.core.confidence``)."""
+
+    radius_m: float = option(
+        0.2, unit="m", low=0.01, high=5.0, doc="the estimate is right when within this distance"
+    )
+    temperature: float = option(
+        TEMPERATURE, low=0.01, high=1000.0,
+        doc="divides the summed log-likelihood ratios: repeated views of one room are not "
+        "independent evidence (fitted on development runs: README)",
+    )  # fmt: skip
+    p_absent: float = option(
+        0.1, low=0.0, high=0.99, doc="prior probability that an object is not in the mapped area"
+    )
 
 
 @dataclass(frozen=True)
@@ -131,6 +177,8 @@ class SurveyConfig:
     data: dict[str, Any] = field(default_factory=dict, repr=False)  # the TOML it was read from
     localization: LocalizationOptions | None = None  # with a base whose pose_source is "laser"
     map_file: Path | None = None  # the localization map's YAML (None: cut from the scene)
+    visibility: VisibilityOptions = field(default_factory=VisibilityOptions)
+    confidence: ConfidenceOptions = field(default_factory=ConfidenceOptions)
 
     @property
     def uses_sim_world(self) -> bool:
@@ -379,6 +427,14 @@ def parse_config(
     detector = _detector(root.table("detector", required=False))
     objects = _objects(root.table("objects"), folder)
     localization, map_file = _localization(root, devices, folder)
+    visibility = _typed(root, "visibility", VisibilityOptions)
+    if visibility.source == "depth" and devices["camera"].type != "sim":
+        raise root.fail(
+            "visibility.source",
+            f'a {devices["camera"].type!r} camera gives no depth; use "model" (the scene '
+            'rendered at the robot\'s pose), "map" or "auto"',
+        )
+    confidence = _typed(root, "confidence", ConfidenceOptions)
     root.finish()
     return SurveyConfig(
         source,
@@ -395,7 +451,22 @@ def parse_config(
         data,
         localization,
         map_file,
+        visibility,
+        confidence,
     )
+
+
+def _typed(root: _Table, name: str, declared: type) -> Any:
+    """An optional table of typed options (defaults when it is absent)."""
+    if not root.has(name):
+        return declared()
+    table = root.table(name)
+    try:
+        options = parse_options(declared, table.data, f"[{name}]")
+    except OptionError as exc:
+        raise table.fail(exc.key, exc.problem) from None
+    table.used.update(table.data)
+    return options
 
 
 def _resolve(text: str, folder: Path, fallback: Path) -> Path:
@@ -543,8 +614,13 @@ def _grid(table: _Table) -> GridConfig:
         )
     max_range = table.number("max_range", None, lambda v: v > 0.0, "a positive range in metres")
     separation = table.number("peak_separation", 0.5, lambda v: v >= 0.0, "a distance >= 0 m")
+    bins = table.integer("direction_bins", 1)
+    if not 1 <= bins <= 64:
+        raise table.fail("direction_bins", f"expected 1 (off) to 64 directions, got {bins}")
     table.finish()
-    return GridConfig(spec, supersample, make_rule(fusion, **params), max_range, separation)
+    # The calibrated rule's log-likelihood ratios come with the detector's models.
+    rule = None if fusion == "calibrated" else make_rule(fusion, **params)
+    return GridConfig(spec, supersample, rule, max_range, separation, fusion, bins)
 
 
 def _detector(table: _Table) -> dict[str, Any]:

@@ -26,18 +26,24 @@ from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 
+from twin.app.config import ConfidenceOptions
 from twin.app.record import Localization, NullRecorder, Recorder, ViewRecord
-from twin.core.devices import Robot
+from twin.app.view_log import LoggedView, ViewLog
+from twin.core.devices import Robot, View
 from twin.core.errors import TwinError
-from twin.core.geometry import Pose2D
+from twin.core.geometry import CameraModel, Pose2D
 from twin.core.grid import AccumulatorGrid
 from twin.core.store import write_text_atomic
+from twin.core.visibility import ColumnVisibility
 
 CHECKPOINT_GRID = "checkpoint/grid.npz"
 CHECKPOINT_STATE = "checkpoint/state.json"
+CHECKPOINT_VIEWS = "checkpoint/views.npz"
 # Where a view's time goes: driving and panning (the physics, in the twin), taking the frame
 # (rendering), scoring and projecting, fusing, recording, saving the checkpoint.
-TIMING_KEYS = ("move", "capture", "detect", "fuse", "record", "checkpoint", "total")
+TIMING_KEYS = (
+    "move", "capture", "detect", "visibility", "fuse", "record", "checkpoint", "total"
+)  # fmt: skip
 
 
 class PatchDetector(Protocol):
@@ -53,6 +59,14 @@ class PatchDetector(Protocol):
     def patch_boxes(self, shape: tuple[int, ...]) -> np.ndarray: ...
 
     def column_spans(self, width: int) -> np.ndarray: ...
+
+
+class VisibilityModel(Protocol):
+    """What the camera could have seen in a view (``twin.app.visibility_models``)."""
+
+    def profiles(
+        self, view: View, camera: CameraModel, column_spans: np.ndarray
+    ) -> ColumnVisibility: ...
 
 
 @runtime_checkable
@@ -166,6 +180,7 @@ class Checkpoint:
     def __init__(self, folder: Path) -> None:
         self.grid_path = folder / CHECKPOINT_GRID
         self.state_path = folder / CHECKPOINT_STATE
+        self.views_path = folder / CHECKPOINT_VIEWS
 
     def load(self, grid: AccumulatorGrid) -> tuple[AccumulatorGrid, MissionState] | None:
         """The saved grid and state, checked against a grid made from the run's config; ``None``
@@ -187,7 +202,26 @@ class Checkpoint:
         del state.truth_path[done:]
         return saved, state
 
-    def save(self, grid: AccumulatorGrid, state: MissionState) -> None:
+    def load_views(self, state: MissionState) -> ViewLog | None:
+        """The saved view log cut to the views the grid holds (it is saved first, so it may be
+        one ahead), or ``None`` if there is none or it is unreadable or short: the log serves
+        comparisons and the confidence, the grid holds what counts."""
+        from twin.core.errors import FileFormatError
+
+        try:
+            log = ViewLog.load(self.views_path)
+        except (FileFormatError, OSError):
+            return None
+        if len(log) < state.views_done:
+            return None
+        log.truncate(state.views_done)
+        return log
+
+    def save(
+        self, grid: AccumulatorGrid, state: MissionState, views: ViewLog | None = None
+    ) -> None:
+        if views is not None:
+            views.save(self.views_path)
         grid.save(self.grid_path)
         write_text_atomic(self.state_path, state.to_json())
 
@@ -198,7 +232,14 @@ class Mission:
 
     ``truth`` (simulation only) maps objects to their true (x, y, z) in metres and
     ``truth_pose`` reads the base's true pose: both only annotate results and recordings, the
-    estimate never sees them. ``state`` continues a resumed mission (``Checkpoint.load``).
+    estimate never sees them. ``state`` continues a resumed mission (``Checkpoint.load``), and
+    ``views`` its view log (``Checkpoint.load_views``).
+
+    ``visibility`` says per view what the camera could have seen; the grid weighs each wedge by
+    it when ``fuse_visibility`` (the profiles are logged either way, for comparisons). ``belief``
+    is a grid with the detector's calibrated rule (log-likelihood ratios), fused alongside
+    ``grid`` (which may hold another rule, or be the same grid) for each object's
+    ``confidence``, read with ``confidence_options``.
     """
 
     def __init__(
@@ -216,6 +257,11 @@ class Mission:
         truth_pose: Callable[[], Pose2D] | None = None,
         pose_gate: PoseGate | None = None,
         say: Callable[[str], None] = lambda _: None,
+        visibility: VisibilityModel | None = None,
+        fuse_visibility: bool = True,
+        belief: AccumulatorGrid | None = None,
+        confidence_options: ConfidenceOptions | None = None,
+        views: ViewLog | None = None,
     ) -> None:
         names = list(detector.names)
         if sorted(names) != sorted(grid.objects):
@@ -236,6 +282,15 @@ class Mission:
         self.truth_pose = truth_pose
         self.pose_gate, self.say = pose_gate, say
         self._names = names
+        self.visibility, self.fuse_visibility = visibility, fuse_visibility
+        self.confidence_options = confidence_options or ConfidenceOptions()
+        self.views = views if views is not None else ViewLog(names, max_range)
+        if len(self.views) != self.state.views_done:
+            # An old checkpoint without a log: the log (and the belief) start from here.
+            self.views = ViewLog(names, max_range)
+        self.belief = belief
+        if belief is not None and belief is not grid and belief.views(names[0]) == 0:
+            self.views.fuse_into(belief, visibility=fuse_visibility)
         # Robot time continues across resumes: this session's clock starts where the last
         # session's last view left it.
         self._clock_origin = robot.camera.now() - self.state.robot_time
@@ -269,12 +324,19 @@ class Mission:
             camera = robot.camera.model
             spans = self.detector.column_spans(view.image.shape[1])
             wedges = camera.wedges(view.pose, view.pan, spans)
+        with self._timed("visibility"):
+            seen = self.visibility.profiles(view, camera, spans) if self.visibility else None
         index = state.views_done
         per_object = {name: values[i] for i, name in enumerate(self._names)}
         refusal = self.pose_gate.reason(view.pose_covariance) if self.pose_gate else None
+        origin = (view.pose.x, view.pose.y)
+        self.views.append(LoggedView(origin, wedges, per_object, seen, refusal is None))
         if refusal is None:
             with self._timed("fuse"):
-                self.grid.fuse_all((view.pose.x, view.pose.y), wedges, per_object, self.max_range)
+                used = seen if self.fuse_visibility else None
+                self.grid.fuse_all(origin, wedges, per_object, self.max_range, used)
+                if self.belief is not None and self.belief is not self.grid:
+                    self.belief.fuse_all(origin, wedges, per_object, self.max_range, used)
         else:
             state.refused.append({"view": index, "reason": refusal})
             self.say(f"view {index + 1} not fused: {refusal}")
@@ -299,13 +361,15 @@ class Mission:
             refusal,
             robot.base.snapshot() if isinstance(robot.base, LocalizingBase) else None,
             tuple((x, y, yaw) for x, y, yaw in state.truth_path),
+            seen,
+            self.confidences(),
         )
         with self._timed("record"):
             self.recorder.log_view(record, self.grid)
             self.recorder.flush()
         if self.checkpoint is not None:
             with self._timed("checkpoint"):
-                self.checkpoint.save(self.grid, state)
+                self.checkpoint.save(self.grid, state, self.views)
         state.timings["total"] += time.perf_counter() - started
         return record
 
@@ -313,8 +377,12 @@ class Mission:
         """Per object the estimate (and, in the sim, the truth and the error), the views fused,
         the robot time and where the time went (seconds)."""
         truth = {name: xyz[:2] for name, xyz in self.truth.items()}
+        objects = estimates(self.grid, truth, peak_separation)
+        for name, (confidence, p_absent) in self.confidence_details().items():
+            objects[name]["confidence"] = round(confidence, 4)
+            objects[name]["p_absent"] = round(p_absent, 4)
         result: dict[str, Any] = {
-            "objects": estimates(self.grid, truth, peak_separation),
+            "objects": objects,
             "views": self.state.views_done,
             "views_refused": list(self.state.refused),
             "robot_time_s": round(self.state.robot_time, 3),
@@ -324,6 +392,28 @@ class Mission:
         if error is not None:
             result["pose_error"] = error
         return result
+
+    def confidence_details(self) -> dict[str, tuple[float, float]]:
+        """Per object (confidence, p_absent): the posterior probability that it lies within the
+        confidence radius of the grid's estimate, and that it is not in the mapped area at all;
+        empty without a calibrated belief grid."""
+        from twin.core.confidence import confidence_within, posterior
+
+        if self.belief is None or self.belief.views(self._names[0]) == 0:
+            return {}
+        options, out = self.confidence_options, {}
+        for name in self._names:
+            best = self.grid.peaks(name, k=1).best
+            cells, p_absent = posterior(
+                self.belief.layer(name), options.temperature, options.p_absent
+            )
+            within = confidence_within(cells, self.belief.spec, (best.x, best.y), options.radius_m)
+            out[name] = (float(within), float(p_absent))
+        return out
+
+    def confidences(self) -> dict[str, float]:
+        """Per object the confidence of its estimate (see ``confidence_details``)."""
+        return {name: c for name, (c, _) in self.confidence_details().items()}
 
 
 def pose_error(state: MissionState) -> dict[str, float] | None:

@@ -41,6 +41,7 @@ from twin.core.errors import TwinError
 from twin.core.fusion import FusionRule
 from twin.core.geometry import CameraModel, Footprint, Pose2D
 from twin.core.grid import AccumulatorGrid
+from twin.core.visibility import ColumnVisibility
 from twin.nav.maps import OccupancyMap
 
 JPEG_QUALITY = 85
@@ -92,6 +93,8 @@ class ViewRecord:
     refusal: str | None = None  # why the view was not fused (its pose too uncertain), if so
     localization: Localization | None = None  # the laser and the particles, with a localizer
     truth_path: tuple[tuple[float, float, float], ...] = ()  # simulation: the true poses so far
+    visibility: ColumnVisibility | None = None  # what each column could have seen, if modelled
+    confidence: dict[str, float] = field(default_factory=dict)  # object -> P(within radius)
 
 
 @dataclass(frozen=True)
@@ -212,7 +215,8 @@ def colour_scale(rule: FusionRule, planned_views: int) -> ColourScale:
     the object, and in each look ``COLUMNS_PER_CELL`` patch columns cover its cell. The top of
     the scale is what the object's cell gathers over the mission: ``accumulate``, a typical
     match (``TYPICAL_MATCH``) per column and look; ``logodds`` (symmetric about 0), the expected
-    weight of a detector with the rule's miss rate; ``normalized`` is a mean match, 0 to a
+    weight of a detector with the rule's miss rate; ``calibrated`` (symmetric), half the
+    strongest log-likelihood ratio per column and look; ``normalized`` is a mean match, 0 to a
     strong one (``STRONG_MATCH``). Tops are rounded up by ``nice_ceil``; a clear peak saturates.
     """
     looks = max(1.0, planned_views / VIEWS_PER_SWEEP) * COLUMNS_PER_CELL
@@ -223,6 +227,12 @@ def colour_scale(rule: FusionRule, planned_views: int) -> ColourScale:
         silent = float(getattr(rule, "silent_weight", 0.0))
         missed = float(getattr(rule, "p_fn", 0.0))
         top = nice_ceil(max(1.0, looks * ((1.0 - missed) * fired + missed * silent)))
+        return ColourScale(-top, top, "cyantoyellow")
+    if rule.name == "calibrated":
+        # Half the strongest log-likelihood ratio per look: the object's cell, seen with some
+        # columns strong and some weak, gathers about that.
+        strongest = max(float(v) for v in getattr(rule, "llr", (1.0,)))
+        top = nice_ceil(max(1.0, looks * 0.5 * strongest))
         return ColourScale(-top, top, "cyantoyellow")
     return ColourScale(0.0, nice_ceil(TYPICAL_MATCH * looks), "viridis")
 
@@ -435,7 +445,7 @@ class RerunRecorder:
                 static=True,
             )
             self._log_legend(name, spec.cell_size)
-            for metric in ("peak", "peak_ratio"):
+            for metric in ("peak", "peak_ratio", "confidence"):
                 log(f"plots/{metric}/{name}", rr.SeriesLines(names=name), static=True)
             if name in scene.truth:
                 self._log_truth(name, scene.truth[name])
@@ -502,6 +512,8 @@ class RerunRecorder:
             self._log_wedges(name, (pose.x, pose.y), record.wedges, values)
         for name in grid.objects:
             self._log_grid(name, grid)
+        for name, confidence in record.confidence.items():
+            log(f"plots/confidence/{name}", rr.Scalars(confidence))
 
     def flush(self) -> None:
         """Block until every view logged so far is in the file (and fsync'd), or sent to the
@@ -584,10 +596,18 @@ class RerunRecorder:
                 eye_up=[0.0, 0.0, 1.0],
             ),
         )
-        camera = rrb.Spatial2DView(name="camera and patch scores", origin="world/robot/camera")
+        camera = rrb.Tabs(
+            rrb.Spatial2DView(name="camera and patch scores", origin="world/robot/camera"),
+            rrb.Spatial2DView(name="depth (visibility)", origin="depth"),
+        )
         plots = rrb.Horizontal(
             rrb.TimeSeriesView(name="peak value", origin="plots/peak"),
             rrb.TimeSeriesView(name="first / second peak", origin="plots/peak_ratio"),
+            rrb.TimeSeriesView(
+                name="confidence: P(within 0.2 m)",
+                origin="plots/confidence",
+                axis_y=rrb.ScalarAxis(range=(0.0, 1.0)),
+            ),
         )
         left = maps[0] if len(maps) == 1 else rrb.Tabs(*maps)
         return rrb.Blueprint(
@@ -836,6 +856,12 @@ class RerunRecorder:
             "world/robot/camera/image",
             rr.Image(image, color_model="RGB").compress(jpeg_quality=JPEG_QUALITY),
         )
+        if record.view.depth is not None:
+            # What the visibility model saw: the depth at half resolution, in millimetres (a
+            # few tens of kB a view), beside the frame in the camera panel.
+            depth = np.nan_to_num(record.view.depth[::2, ::2], nan=0.0, posinf=0.0)
+            millimetres = np.clip(depth * 1000.0, 0, 65535).astype(np.uint16)
+            log("depth", rr.DepthImage(millimetres, meter=1000.0, colormap="turbo"))
         for name, scores in record.scores.items():
             levels, block = score_levels(record.patch_boxes, scores, image.shape[:2])
             overlay = f"world/robot/camera/image/scores/{name}"

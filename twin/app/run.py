@@ -2,7 +2,8 @@
 
 A run folder holds ``config.toml`` (the config the run really uses, ``--set`` overrides
 included), ``run.json`` (how it was started: ``RunOptions``), the checkpoint, and at the end
-``result.json``, ``grid.npz``, ``grid_<object>.png`` and the Rerun recording. ``twin survey``
+``result.json``, ``grid.npz``, ``views.npz`` (``twin.app.view_log``), ``grid_<object>.png``
+and the Rerun recording. ``twin survey``
 starts a run with ``start_run``; ``twin survey --resume DIR`` continues one with ``resume_run``;
 both fly it with ``run_mission``.
 
@@ -32,11 +33,13 @@ from twin.app.outputs import check_output_folder, make_output_folder, removed_on
 from twin.app.plots import grid_figure
 from twin.app.record import NullRecorder, Recorder, RerunRecorder, SceneInfo
 from twin.app.survey import plan_views, run_survey
+from twin.app.visibility_models import build_visibility
 from twin.core.errors import InputError, Terminated, TwinError
 from twin.core.grid import AccumulatorGrid
 from twin.core.store import json_safe, write_text_atomic
 
 RESULT_FILE = "result.json"
+VIEWS_FILE = "views.npz"  # every view as numbers, to fuse again with other settings (view_log)
 RECORDING_FILE = "recording.rrd"
 RUN_CONFIG = "config.toml"
 RUN_OPTIONS = "run.json"
@@ -223,20 +226,29 @@ def _fly(config, robot, context, run, resume, started, quiet, on_result) -> dict
     truth = _truth(config, sim)
     scene = _scene_info(config, sim, truth)
     say = (lambda _: None) if quiet else print
-    detector = prepare_detector(config.objects, config.detector, config.cache, say)
-    names = [obj.name for obj in config.objects]
-    grid = AccumulatorGrid(names, config.grid.spec, config.grid.rule, config.grid.supersample)
+    detector = prepare_detector(
+        config.objects, config.detector, config.cache, say, calibration_scene=str(config.scene)
+    )
+    grid, belief = make_grids(config, detector)
     checkpoint = Checkpoint(out)
     state = MissionState()
+    views = None
     if resume and (loaded := checkpoint.load(grid)) is not None:
         grid, state = loaded
+        views = checkpoint.load_views(state)
+        if config.grid.fusion == "calibrated":
+            belief = grid
     plan = plan_views(config.mission, robot.pantilt.limits)
     recorder = _recorder(out, options, resume, say)
     gate = None
+    occupancy = None
     if config.localization is not None:
         o = config.localization
         gate = PoseGate(o.max_sigma_m, math.radians(o.max_sigma_deg))
-        scene = replace(scene, occupancy=robot.base.map)
+        occupancy = robot.base.map
+        scene = replace(scene, occupancy=occupancy)
+    world = sim.world if sim is not None else _scene_world(config)
+    visibility = build_visibility(config, world, robot.camera.model, occupancy)
     mission = Mission(
         robot,
         detector,
@@ -249,6 +261,10 @@ def _fly(config, robot, context, run, resume, started, quiet, on_result) -> dict
         truth_pose=sim.truth_pose if sim is not None else None,
         pose_gate=gate,
         say=say,
+        visibility=visibility,
+        belief=belief,
+        confidence_options=config.confidence,
+        views=views,
     )
     setup_time = time.perf_counter() - setup_started
     n_stops = len(config.mission.stops)
@@ -280,8 +296,21 @@ def _fly(config, robot, context, run, resume, started, quiet, on_result) -> dict
             raise stopped_by  # nothing fused yet: nothing to report
         # The grid in memory may hold half a view: report what the checkpoint holds.
         grid, state = checkpoint.load(grid) or (grid, state)
+        views = checkpoint.load_views(state)
+        if config.grid.fusion == "calibrated":
+            belief = grid
+        elif belief is not None:
+            belief = make_grids(config, detector)[1]  # refilled from the log
         mission = Mission(
-            robot, detector, grid, state=state, truth=truth, max_range=config.grid.max_range
+            robot,
+            detector,
+            grid,
+            state=state,
+            truth=truth,
+            max_range=config.grid.max_range,
+            belief=belief,
+            confidence_options=config.confidence,
+            views=views,
         )
     result = _write_results(
         config, mission, scene, out, options, status, len(plan), setup_time, started
@@ -292,6 +321,38 @@ def _fly(config, robot, context, run, resume, started, quiet, on_result) -> dict
         on_result(result)
     recorder.wait()
     return result
+
+
+def make_grids(config: SurveyConfig, detector) -> tuple[AccumulatorGrid, AccumulatorGrid | None]:
+    """The mission's grid (the configured rule) and its belief grid (the detector's calibrated
+    log-likelihood ratios, for the confidence: the same grid when that is the rule; None when a
+    model has no calibration). ``grid.fusion = "calibrated"`` without one is refused."""
+    names = [model.name for model in detector.models]
+    missing = [model.name for model in detector.models if model.calibration is None]
+    calibrated = {m.name: m.calibration.rule() for m in detector.models if m.calibration}
+    g = config.grid
+    if g.fusion == "calibrated" and missing:
+        raise InputError(
+            f'grid.fusion = "calibrated" needs each model\'s score calibration; {missing[0]!r} '
+            "has none: store one with 'twin roc --store', train it from the scene (objects.NAME."
+            "body), or choose another grid.fusion"
+        )
+    belief = None
+    if not missing:
+        belief = AccumulatorGrid(
+            names, g.spec, calibrated, g.supersample, direction_bins=g.direction_bins
+        )
+    if g.fusion == "calibrated":
+        return belief, belief
+    grid = AccumulatorGrid(names, g.spec, g.rule, g.supersample, direction_bins=g.direction_bins)
+    return grid, belief
+
+
+def _scene_world(config: SurveyConfig):
+    """The scene as a model of the room (the real robot's visibility model and map drawing)."""
+    from twin.sim import World
+
+    return World(config.scene)
 
 
 def _status(exc: BaseException) -> str:
@@ -315,6 +376,7 @@ def _write_results(
 ) -> dict[str, Any]:
     grid = mission.grid
     grid.save(out / "grid.npz")
+    mission.views.save(out / VIEWS_FILE)
     result = mission.result(config.grid.peak_separation)
     result = {
         "status": status,
@@ -369,9 +431,7 @@ def _truth(config: SurveyConfig, sim) -> dict[str, tuple[float, float, float]]:
 
 def _scene_info(config: SurveyConfig, sim, truth) -> SceneInfo:
     """The room's outline and furniture from the scene file (the map, on the real robot too)."""
-    from twin.sim import World
-
-    world = sim.world if sim is not None else World(config.scene)
+    world = sim.world if sim is not None else _scene_world(config)
     furniture = tuple(world.footprints()[name] for name in world.furniture())
     return SceneInfo(world.room_bounds(), furniture, dict(truth), config.grid.peak_separation)
 

@@ -92,6 +92,8 @@ def print_summary(out: Path, result: dict) -> None:
         line = f"{name}: estimate ({x:.2f}, {y:.2f}) m, peak {entry['peak']:.2f}"
         ratio = entry["peak_ratio"]
         line += f", first/second peak {ratio:.2f}" if ratio is not None else ""
+        if "confidence" in entry:
+            line += f", confidence {entry['confidence']:.2f} (absent {entry['p_absent']:.2f})"
         if "error_m" in entry:
             line += f", truth ({entry['truth_m'][0]:.2f}, {entry['truth_m'][1]:.2f}) m, "
             line += f"error {entry['error_m']:.2f} m"
