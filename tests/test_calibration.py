@@ -173,7 +173,12 @@ def counted_views(monkeypatch):
     def calibration_views(scene="living_room", target=None, **recipe):
         calls["calibration"].append((scene, target, recipe))
         # Most frames without the square, as in the twin's calibration views.
-        return square_views((30, 40, 210), (None, 20, None, 200, None, None, 100, None), seed=1)
+        from twin.sim.training import CalibrationViews
+
+        images, masks = square_views(
+            (30, 40, 210), (None, 20, None, 200, None, None, 100, None), seed=1
+        )
+        return CalibrationViews(images, masks, np.linspace(1.0, 4.0, len(images)))
 
     monkeypatch.setattr(twin.sim, "training_views", training_views)
     monkeypatch.setattr(twin.sim.training, "calibration_views", calibration_views)
@@ -249,10 +254,75 @@ def test_roc_prints_the_llr_table_and_stores_it_when_asked(tmp_path, capsys):
 def test_calibration_views_render_the_target_among_the_furniture():
     from twin.sim.training import calibration_views
 
-    images, masks = calibration_views(n_placements=1, views_per_placement=4, aimed_fraction=1.0)
+    images, masks, distances = calibration_views(
+        n_placements=1, views_per_placement=4, aimed_fraction=1.0
+    )
     assert images.shape == (4, 240, 320, 3) and images.dtype == np.uint8
     assert masks.shape == (4, 240, 320) and masks.dtype == bool
+    assert distances.shape == (4,) and np.all(distances >= 0.6)  # min_distance from the target
     seen = masks.reshape(4, -1).sum(axis=1)
     assert seen.max() > 50  # views aimed at the box show it (some may have it hidden)
-    again, _ = calibration_views(n_placements=1, views_per_placement=4, aimed_fraction=1.0)
+    again, _, _ = calibration_views(n_placements=1, views_per_placement=4, aimed_fraction=1.0)
     np.testing.assert_array_equal(again, images)  # seeded: the same frames every time
+
+
+def test_a_calibration_keeps_one_table_per_distance_band() -> None:
+    rng = np.random.default_rng(7)
+    # Near the object scores high; far it fades into the background.
+    near = rng.beta(8, 6, 400)
+    far = rng.beta(2, 12, 400)
+    off = rng.beta(2, 14, 4000)
+    scores = np.concatenate([near, far, off])
+    truth = np.concatenate([np.ones(800, int), np.zeros(4000, int)])
+    distances = np.concatenate([np.full(400, 1.0), np.full(400, 4.0), np.full(4000, 2.0)])
+    cal = ScoreCalibration.from_columns(scores, truth, distances=distances, ranges=(2.0,))
+    tables = cal.range_tables()
+    assert tables.shape == (2, len(cal.on_counts))
+    strong = cal.llr(np.array([0.6]))[0]
+    high = int(np.searchsorted(cal.edges, 0.6, side="right") - 1)
+    assert tables[0, high] > tables[1, high]  # a high score is stronger evidence near than far
+    assert tables[0, high] >= strong - 1e-9  # and the pooled table lies between the bands
+    assert cal.range_on_counts[0] != cal.range_on_counts[1]
+    again = ScoreCalibration.from_json(json.loads(json.dumps(cal.to_json())))
+    np.testing.assert_array_equal(again.range_tables(), tables)
+    rule = cal.rule()
+    assert rule.ranges == (2.0,) and len(rule.range_llr) == 2
+    assert "LLR by the object's distance" in cal.table_text()
+
+
+def test_the_ranged_rule_mixes_visibility_into_the_likelihood_ratio() -> None:
+    rule = make_rule(
+        "calibrated", edges=(0.0, 0.5, 1.0), llr=(-1.0, 2.0), ranges=(2.0,),
+        range_llr=((-2.0, 3.0), (-0.5, 1.0)),
+    )  # fmt: skip
+    values = np.array([0.9, 0.1])
+    visibility = np.array([[1.0, 0.5, 0.0, 1.0], [1.0, 0.5, 0.0, 1.0]])
+    step = 1.0  # bins centred at 0.5, 1.5 (near band), 2.5, 3.5 m (far band)
+    w = rule.weight_profiles(values, visibility, step)
+    assert w[0, 0] == pytest.approx(3.0) and w[1, 0] == pytest.approx(-2.0)
+    assert w[0, 1] == pytest.approx(math.log(0.5 * math.exp(3.0) + 0.5))
+    assert w[1, 1] == pytest.approx(math.log(0.5 * math.exp(-2.0) + 0.5))
+    assert w[0, 2] == 0.0 and w[1, 2] == 0.0  # hidden: no evidence either way
+    assert w[0, 3] == pytest.approx(1.0) and w[1, 3] == pytest.approx(-0.5)  # far band
+    # The pooled table is what callers without distances get.
+    np.testing.assert_array_equal(rule.column_weights(values), [2.0, -1.0])
+
+
+def test_the_grid_fuses_the_ranged_rule_cell_by_cell() -> None:
+    from twin.core.grid import AccumulatorGrid, GridSpec
+    from twin.core.visibility import ColumnVisibility
+
+    rule = make_rule(
+        "calibrated", edges=(0.0, 0.5, 1.0), llr=(-1.0, 2.0), ranges=(1.0,),
+        range_llr=((-2.0, 3.0), (-0.5, 1.0)),
+    )  # fmt: skip
+    spec = GridSpec(0.0, 0.0, 3.0, 2.0, 0.1)
+    grid = AccumulatorGrid(["box"], spec, rule, 4)
+    wedge = np.array([[-0.05, 0.05]])
+    seen = ColumnVisibility(np.array([[1.0] * 20 + [0.5] * 20]), 0.05)  # half seen beyond 1 m
+    grid.fuse_all((0.0, 1.0), wedge, {"box": np.array([0.9])}, None, seen)
+    observed, layer = grid.observed("box"), grid.layer("box")
+    near, far = (10, 7), (10, 15)  # cells on the axis at 0.75 m and 1.55 m
+    assert layer[near] == pytest.approx(3.0 * observed[near])
+    half_seen = observed[far] / 0.5  # observed counts the visible share
+    assert layer[far] == pytest.approx(math.log(0.5 * math.e + 0.5) * half_seen)

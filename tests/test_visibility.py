@@ -88,12 +88,16 @@ def test_open_room_is_visible_within_the_vertical_field_of_view() -> None:
     assert anywhere.shape == (len(SPANS), 160)
     assert np.all(anywhere[:, _bins(0.5, 8.0)] == 1.0)
     floor = _profiles(depth, FLOOR)
-    # a 0.2 m object on the floor shows its top (0.15 m) once 0.85 m / d < tan(vfov / 2)
-    limit = 0.85 / math.tan(CAMERA.vfov / 2)
-    assert np.all(floor[:, _bins(0.0, limit - 0.1)] == 0.0)  # 0.5 m included
-    assert np.all(floor[CENTRE, _bins(limit + 0.1, 8.0)] == 1.0)
+    # a 0.2 m object on the floor shows its top (0.15 m) once 0.85 m / d < tan(vfov / 2), and
+    # all of it (down to its lowest sample point, 0.05 m) once 0.95 m / d < tan(vfov / 2)
+    half = math.tan(CAMERA.vfov / 2)
+    top, whole = 0.85 / half, 0.95 / half
+    assert np.all(floor[:, _bins(0.0, top - 0.1)] == 0.0)  # 0.5 m included
+    partly = floor[CENTRE, _bins(top + 0.05, whole - 0.05)]
+    assert np.all((partly > 0.0) & (partly < 1.0))  # its top shows, its foot does not
+    assert np.all(floor[CENTRE, _bins(whole + 0.1, 8.0)] == 1.0)
     # outer columns look along longer rays, so their blind zone reaches further
-    assert np.all(floor[:, _bins(limit / math.cos(CAMERA.hfov / 2) + 0.1, 8.0)] == 1.0)
+    assert np.all(floor[:, _bins(whole / math.cos(CAMERA.hfov / 2) + 0.1, 8.0)] == 1.0)
 
 
 def test_a_wall_hides_everything_behind_it() -> None:
@@ -107,7 +111,7 @@ def test_a_wall_hides_everything_behind_it() -> None:
 
 @pytest.mark.parametrize(
     ("level", "near", "far", "hidden"),
-    [(0.0, 3.0, 3.5, True), (0.45, 2.1, 2.5, True), (1.2, 2.1, 4.0, False)],
+    [(0.0, 3.1, 3.5, True), (0.45, 2.1, 2.5, True), (1.2, 2.1, 4.0, False)],
 )
 def test_a_sofa_back_hides_the_floor_and_seats_behind_it_but_not_a_shelf(
     level: float, near: float, far: float, hidden: bool
@@ -317,5 +321,5 @@ def test_visibility_from_map_depth_hides_what_the_laser_map_blocks() -> None:
         _map_with_block(), CAMERA, origin=(0.0, 0.0), axis=0.0, tilt=0.0, camera_height=1.0
     )
     profiles = _profiles(depth, _levels(0.0, 0.45, 1.2))
-    assert np.all(profiles[CENTRE, _bins(1.0, 1.9)] == 1.0)
+    assert np.all(profiles[CENTRE, _bins(1.2, 1.9)] == 1.0)  # the 1.2 m shelf, wholly
     assert np.all(profiles[CENTRE, _bins(2.3, 8.0)] == 0.0)  # a 2 m wall hides every level

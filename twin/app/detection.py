@@ -33,9 +33,9 @@ TRAINING_SCENE = "training_stage"
 # How the calibration is measured: part of its cache key. 12 placements x 16 views give about
 # 3500 columns of which about 130 lie on the rice box (measured in living_room).
 CALIBRATION_RECIPE: dict[str, Any] = {
-    "n_placements": 12,
+    "n_placements": 24,
     "views_per_placement": 16,
-    "aimed_fraction": 0.25,
+    "aimed_fraction": 0.5,  # enough positives for a table per distance band
     "min_cover": 0.25,
 }
 
@@ -124,7 +124,7 @@ def calibration_key(model_key: str, scene: str | None) -> str:
     """What a calibration depends on beyond its model, hashed: the scene, the recipe, the
     calibration format and the reserved seed. (The scene's assets and the code version are in
     ``model_key`` already.)"""
-    from twin.rfch.calibration import CALIBRATION_VERSION
+    from twin.rfch.calibration import CALIBRATION_VERSION, DEFAULT_RANGES
     from twin.sim.training import CALIBRATION_SEED
 
     recipe = {
@@ -133,6 +133,7 @@ def calibration_key(model_key: str, scene: str | None) -> str:
         "recipe": CALIBRATION_RECIPE,
         "format": CALIBRATION_VERSION,
         "seed": CALIBRATION_SEED,
+        "ranges": DEFAULT_RANGES,
     }
     return hashlib.sha256(json.dumps(recipe, sort_keys=True).encode()).hexdigest()[:12]
 
@@ -149,12 +150,17 @@ def _calibrate(model: Any, obj: ObjectConfig, scene: str, say: Callable[[str], N
     recipe = dict(CALIBRATION_RECIPE)
     min_cover = recipe.pop("min_cover")
     say(f"calibrating the RFCH model of {obj.name!r} on {scene} views")
-    images, masks = training.calibration_views(scene=scene, target=obj.body, **recipe)
+    views = training.calibration_views(scene=scene, target=obj.body, **recipe)
     detector = Detector([model])
-    scores = [detector.scores(image)[0].max(axis=0) for image in images]
-    truth = [column_truth(mask, model.params.grid, min_cover) for mask in masks]
+    scores = [detector.scores(image)[0].max(axis=0) for image in views.images]
+    truth = [column_truth(mask, model.params.grid, min_cover) for mask in views.masks]
+    # Every column of a view sees the object (if at all) at the view's distance.
+    distances = [np.full(len(t), d) for t, d in zip(truth, views.distances, strict=True)]
     calibration = ScoreCalibration.from_columns(
-        np.concatenate(scores), np.concatenate(truth), min_cover=min_cover
+        np.concatenate(scores),
+        np.concatenate(truth),
+        min_cover=min_cover,
+        distances=np.concatenate(distances),
     )
     say(f"calibration of {obj.name!r}: {calibration.describe()}")
     return replace(model, calibration=calibration)

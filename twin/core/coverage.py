@@ -28,11 +28,12 @@ TWO_PI = 2.0 * math.pi
 # Stand-in for the cotangent of 0 (and of pi from above): dy * _HUGE overflows nothing for any
 # |dy| the grid can see, and is clipped to the grid right after.
 _HUGE = 1e300
-# What the kernel needs to weigh a cell by its visibility to a wedge: per-wedge profiles of
-# visibility (0..1) over distance from the origin in bins of ``step`` metres (no bins: every
-# cell fully visible), the origin, and the grid's corner and cell size.
+# What the kernel needs to weigh a cell by its visibility to a wedge: profiles (p, n_wedges,
+# n_bins) over distance from the origin in bins of ``step`` metres, shared by every weight row
+# (p = 1) or one per row (p = k); no bins: every cell fully visible. Also the origin, and the
+# grid's corner and cell size.
 _Seeing = namedtuple("_Seeing", "profiles step ox oy x0 y0 cell")
-NO_VISIBILITY = np.zeros((0, 0))
+NO_VISIBILITY = np.zeros((1, 0, 0))
 
 
 @njit(cache=True, inline="always")
@@ -131,16 +132,26 @@ def _add_run(out, row: int, i_lo: int, i_hi: int, s: int, weights, w: int, scale
 
 @njit(cache=True)
 def _add_seen_run(out, row: int, i_lo: int, i_hi: int, s: int, weights, w: int, scale, see):
-    """``_add_run`` with each cell's share scaled by its visibility to wedge ``w``."""
+    """``_add_run`` with each cell's share scaled by its profile value for wedge ``w`` (one
+    profile for every weight row, or one per row)."""
     if i_hi <= i_lo:
         return
     k = weights.shape[0]
+    per_row = see.profiles.shape[0] > 1
     for c in range(i_lo // s, (i_hi - 1) // s + 1):
-        count = (min(i_hi, s * (c + 1)) - max(i_lo, s * c)) * scale * _visible(see, w, row, c)
-        if count == 0.0:
-            continue
-        for q in range(k):
-            out[q, row, c] += weights[q, w] * count
+        b = _distance_bin(see, row, c)
+        if b >= see.profiles.shape[2]:
+            continue  # beyond the profiles: not seen
+        count = (min(i_hi, s * (c + 1)) - max(i_lo, s * c)) * scale
+        if per_row:
+            for q in range(k):
+                out[q, row, c] += weights[q, w] * count * see.profiles[q, w, b]
+        else:
+            count *= see.profiles[0, w, b]
+            if count == 0.0:
+                continue
+            for q in range(k):
+                out[q, row, c] += weights[q, w] * count
 
 
 @njit(cache=True, inline="always")
@@ -152,15 +163,12 @@ def _run(out, row, i_lo, i_hi, s, weights, w, scale, see, seeing: bool) -> None:
 
 
 @njit(cache=True, inline="always")
-def _visible(see, w: int, row: int, col: int) -> float:
-    """How visible cell (row, col) is to wedge ``w``: its profile at the cell centre's distance
-    from the origin (0 beyond the profile's last bin)."""
+def _distance_bin(see, row: int, col: int) -> int:
+    """The profile bin of cell (row, col): its centre's distance from the origin over the
+    profiles' step."""
     dx = see.x0 + (col + 0.5) * see.cell - see.ox
     dy = see.y0 + (row + 0.5) * see.cell - see.oy
-    b = int(math.sqrt(dx * dx + dy * dy) / see.step)
-    if b >= see.profiles.shape[1]:
-        return 0.0
-    return see.profiles[w, b]
+    return int(math.sqrt(dx * dx + dy * dy) / see.step)
 
 
 @njit(cache=True)
@@ -185,13 +193,15 @@ def add_coverage(
     are ``cell`` metres. Coverage is the fraction (0..1) of a cell's supersample points in the
     wedge. ``max_range <= 0`` means unlimited range. Wedges are given by a0 < a1 in radians.
 
-    ``visibility`` (n_wedges, n_bins), when it has bins, scales each cell's coverage by how
-    visible the cell is to the wedge: the wedge's profile at the distance of the cell's centre
-    from the origin, in bins of ``visibility_step`` metres (0 beyond the last bin): a cell the
-    camera could not have seen an object in gains nothing, and loses nothing.
+    ``visibility`` (p, n_wedges, n_bins), when it has bins, scales each cell's coverage by the
+    wedge's profile at the distance of the cell's centre from the origin, in bins of
+    ``visibility_step`` metres (0 beyond the last bin): with p = 1 one profile for every weight
+    row (how visible the cell was: a cell the camera could not have seen an object in gains
+    nothing, and loses nothing), with p = k one per row (a rule whose weight varies with
+    distance, e.g. a detector that weakens with range).
     """
     see = _Seeing(visibility, visibility_step, ox, oy, x0, y0, cell)
-    seeing = visibility.shape[1] > 0
+    seeing = visibility.shape[2] > 0
     ny = out.shape[1]
     nx = out.shape[2]
     s = supersample

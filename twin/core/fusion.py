@@ -142,21 +142,36 @@ class Calibrated:
     """Each column adds the log-likelihood ratio of its score: log p(s | on) / p(s | off).
 
     ``edges`` (B+1 increasing numbers) bin the score; ``llr`` (B numbers, nats) is each bin's
-    ratio. Scores beyond the edges take the end bins. Evidence summed over views and columns,
-    weighted by coverage, is the log posterior odds of each cell up to the prior; read returns
+    ratio, pooled over distances. Scores beyond the edges take the end bins. Evidence summed
+    over views and columns is the log posterior odds of each cell up to the prior; read returns
     it unchanged. No defaults: a table only means something for the detector it was measured on
     (``ScoreCalibration.rule()`` builds this rule from a model's calibration).
+
+    A detector weakens with distance (a far object covers few pixels of a patch), so a
+    calibration may hold one table per distance band: ``ranges`` (K-1 increasing metres) cut
+    the distance from the camera into K bands and ``range_llr`` (K rows of B) gives each band's
+    table. In the grid the rule is *ranged*: each cell gets the table of its own distance, and
+    its visibility v (the share of an object there the camera could see, ``ColumnVisibility``)
+    mixes the two hypotheses rather than scaling the ratio: with the object there, the column's
+    score comes from the on-distribution with probability v and from the off-distribution
+    otherwise, so the cell gains log(v LR + 1 - v): 0 where hidden, the full LLR where wholly
+    seen (``weight_profiles``). ``column_weights`` (the pooled table, as if every cell were
+    fully seen) serves callers without distances, such as the Monte Carlo.
     """
 
     name: ClassVar[str] = "calibrated"
     edges: tuple[float, ...]
     llr: tuple[float, ...]
+    ranges: tuple[float, ...] = ()
+    range_llr: tuple[tuple[float, ...], ...] = ()
 
     def __post_init__(self) -> None:
         # Lists come back from the grid header's JSON; keep tuples so the rule stays hashable.
         try:
             edges = tuple(float(e) for e in self.edges)
             llr = tuple(float(v) for v in self.llr)
+            ranges = tuple(float(r) for r in self.ranges)
+            range_llr = tuple(tuple(float(v) for v in row) for row in self.range_llr)
         except (TypeError, ValueError) as exc:
             raise InputError(f"calibrated edges and llr must be numbers: {exc}") from None
         if len(edges) < 2 or len(llr) != len(edges) - 1:
@@ -164,23 +179,62 @@ class Calibrated:
                 f"calibrated needs B+1 edges and B llr values, got {len(edges)} and {len(llr)}; "
                 "take both from ScoreCalibration.rule()"
             )
-        if not all(math.isfinite(v) for v in edges + llr):
+        if range_llr and (
+            len(range_llr) != len(ranges) + 1 or any(len(row) != len(llr) for row in range_llr)
+        ):
+            raise InputError(
+                f"calibrated range tables: {len(ranges)} range edges need {len(ranges) + 1} "
+                f"rows of {len(llr)} values, got {[len(row) for row in range_llr]}"
+            )
+        if ranges and not range_llr:
+            raise InputError("calibrated ranges need their range_llr tables")
+        numbers = edges + llr + ranges + tuple(v for row in range_llr for v in row)
+        if not all(math.isfinite(v) for v in numbers):
             raise InputError("calibrated edges and llr must be finite")
         if any(b <= a for a, b in itertools.pairwise(edges)):
             raise InputError("calibrated edges must increase strictly")
+        if any(b <= a for a, b in itertools.pairwise(ranges)) or any(r <= 0 for r in ranges):
+            raise InputError("calibrated ranges must be increasing positive distances (m)")
         object.__setattr__(self, "edges", edges)
         object.__setattr__(self, "llr", llr)
+        object.__setattr__(self, "ranges", ranges)
+        object.__setattr__(self, "range_llr", range_llr)
+
+    ranged: ClassVar[bool] = True  # the grid asks weight_profiles for per-distance weights
+
+    def _score_bins(self, values: np.ndarray) -> np.ndarray:
+        index = np.searchsorted(np.asarray(self.edges), values, side="right") - 1
+        return np.clip(index, 0, len(self.llr) - 1)
 
     def column_weights(self, values: np.ndarray) -> np.ndarray:
+        return np.asarray(self.llr)[self._score_bins(np.asarray(values, dtype=float))]
+
+    def weight_profiles(
+        self, values: np.ndarray, visibility: np.ndarray, step: float
+    ) -> np.ndarray:
+        """(n, bins) weight of each column's cells over distance (bins of ``step`` metres):
+        log(v LR + 1 - v), with LR the ratio of the column's score in the table of the bin's
+        distance band and v the column's visibility profile (n, bins) in [0, 1]."""
         values = np.asarray(values, dtype=float)
-        index = np.searchsorted(np.asarray(self.edges), values, side="right") - 1
-        return np.asarray(self.llr)[np.clip(index, 0, len(self.llr) - 1)]
+        visibility = np.asarray(visibility, dtype=float)
+        scores = self._score_bins(values)  # (n,)
+        if self.range_llr:
+            centres = (np.arange(visibility.shape[1]) + 0.5) * step
+            band = np.searchsorted(np.asarray(self.ranges), centres, side="right")  # (bins,)
+            ratio = np.asarray(self.range_llr)[band[None, :], scores[:, None]]
+        else:
+            ratio = np.broadcast_to(np.asarray(self.llr)[scores][:, None], visibility.shape)
+        return np.log1p(visibility * np.expm1(ratio))
 
     def read(self, evidence: np.ndarray, observed: np.ndarray) -> np.ndarray:
         return evidence
 
     def params(self) -> dict[str, Any]:
-        return {"edges": list(self.edges), "llr": list(self.llr)}
+        out: dict[str, Any] = {"edges": list(self.edges), "llr": list(self.llr)}
+        if self.range_llr:
+            out["ranges"] = list(self.ranges)
+            out["range_llr"] = [list(row) for row in self.range_llr]
+        return out
 
 
 def logodds_weights(p_fp: float, p_fn: float) -> tuple[float, float]:

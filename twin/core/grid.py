@@ -399,12 +399,30 @@ class AccumulatorGrid:
             raise InputError("values must name at least one object")
         indices = [self._object_index(name) for name in values]
         rows = [self._check_values(name, v, len(wedges)) for name, v in values.items()]
-        weights = np.stack(
-            [self.rules[name].column_weights(v) for name, v in zip(values, rows, strict=True)]
-            + [np.ones(len(wedges))]
-        )
-        delta = np.zeros((len(weights), *self.spec.shape))
-        self._add(delta, ox, oy, wedges, weights, reach, visibility)
+        rules = [self.rules[name] for name in values]
+        delta = np.zeros((len(rows) + 1, *self.spec.shape))
+        if all(getattr(rule, "ranged", False) for rule in rules):
+            # The rule's weight depends on the cell's distance (and visibility) too: one
+            # weight profile per object row, and the visibility for the observed row.
+            seen = visibility or ColumnVisibility.everywhere(
+                len(wedges), reach if reach > 0 else self._farthest(ox, oy)
+            )
+            profiles = np.stack(
+                [
+                    rule.weight_profiles(v, seen.profiles, seen.step)
+                    for rule, v in zip(rules, rows, strict=True)
+                ]
+                + [seen.profiles]
+            )
+            weights = np.ones((len(rows) + 1, len(wedges)))
+            self._add(delta, ox, oy, wedges, weights, reach, profiles, seen.step)
+        else:
+            weights = np.stack(
+                [rule.column_weights(v) for rule, v in zip(rules, rows, strict=True)]
+                + [np.ones(len(wedges))]
+            )
+            shared = None if visibility is None else visibility.profiles[None]
+            self._add(delta, ox, oy, wedges, weights, reach, shared, getattr(visibility, "step", 1))
         if self.direction_bins == 1:
             for k, i in enumerate(indices):
                 self._evidence[i, 0] += delta[k]
@@ -536,10 +554,19 @@ class AccumulatorGrid:
         evidence = self._evidence[i] / np.maximum(seen, 1.0)
         return self._prior[i] + evidence.sum(axis=0), np.minimum(seen, 1.0).sum(axis=0)
 
-    def _add(self, out, ox, oy, wedges, weights, reach, visibility=None) -> None:
-        profiles, step = (
-            (NO_VISIBILITY, 1.0) if visibility is None else (visibility.profiles, visibility.step)
+    def _farthest(self, ox: float, oy: float) -> float:
+        """Metres from (ox, oy) to the grid's farthest corner (a profile's reach over it)."""
+        spec = self.spec
+        return max(
+            math.hypot(x - ox, y - oy)
+            for x in (spec.x_min, spec.x_max)
+            for y in (spec.y_min, spec.y_max)
         )
+
+    def _add(self, out, ox, oy, wedges, weights, reach, profiles=None, step=1.0) -> None:
+        """Coverage into ``out``; ``profiles`` (1 or k, n, bins) scale it per cell (kernel)."""
+        if profiles is None:
+            profiles, step = NO_VISIBILITY, 1.0
         add_coverage(
             out, ox, oy, np.ascontiguousarray(wedges[:, 0]), np.ascontiguousarray(wedges[:, 1]),
             np.ascontiguousarray(weights, dtype=float), self.spec.x_min, self.spec.y_min,

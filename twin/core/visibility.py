@@ -16,13 +16,15 @@ How a profile is computed from depth (the project's decision on heights). For pa
 (pixels [u0, u1]) and distance bin b (centre r metres, horizontal, from the camera's optical
 centre): a few pixel columns u are sampled evenly inside the span; for each, the point at
 horizontal distance r along u's bearing lies over some plan cell, and an object could stand on
-any of that cell's support levels h (``SupportLevels.sample``). It is *seen* from u if, for some
-level h, one of its sample points at heights h + f * object_height (f in 0.25, 0.5, 0.75)
-projects inside the image (through the pinhole, given the camera's height and tilt) and the
-depth along that pixel's ray is at least the distance to the point minus a tolerance: the
-object's own half-width plus half a cell (0.2 m by default), because when the object is there
-it is itself what the depth hits. A NaN depth (nothing within range) hides nothing. The profile
-value is the fraction of the sampled pixel columns from which it is seen. So a column looking
+any of that cell's support levels h (``SupportLevels.sample``). A sample point of the object,
+at height h + f * object_height (f in 0.25, 0.5, 0.75), is *seen* from u if it projects inside
+the image (through the pinhole, given the camera's height and tilt) and the depth along that
+pixel's ray is at least the distance to the point minus a tolerance: the object's own
+half-width plus half a cell (0.2 m by default), because when the object is there it is itself
+what the depth hits. A NaN depth (nothing within range) hides nothing. The object is as visible
+from u as the share of its sample points seen, on its best-seen level; the profile value is the
+mean over the sampled pixel columns. An object half hidden behind the sofa's arm is half
+visible: a detector sees half an object, and its silence there says less. So a column looking
 at the back of the sofa sees the shelf above and behind it but not the floor or the seat behind
 it, and the floor at the camera's feet, below the vertical field of view, is seen by no column.
 """
@@ -216,11 +218,11 @@ def visibility_from_depth(
 def _count_seen(
     levels, cos_b, sin_b, r, lifts, camera_height, cos_t, sin_t, focal, depth, tolerance, seen
 ):
-    """Adds to ``seen[c, b]`` the number of column c's sampled pixel columns from which an
-    object at distance bin b would be seen (the rule in the module docstring). A loop, not
-    arrays: it stops at the first visible height of the first visible level, where arrays would
-    compute every level and height of every point (measured, 20 columns x 160 bins: 10-28 ms
-    as arrays, 1-1.6 ms as this loop; benchmarks/bench_visibility.py)."""
+    """Adds to ``seen[c, b]``, for each of column c's sampled pixel columns, the share of an
+    object at distance bin b that would be seen from it (the rule in the module docstring). A
+    loop, not arrays: it stops at the first wholly seen level, where arrays would compute every
+    level and height of every point (measured, 20 columns x 160 bins: 10-28 ms as arrays,
+    1-1.6 ms as this loop; benchmarks/bench_visibility.py)."""
     n, n_samples, n_bins, n_levels = levels.shape
     height, width = depth.shape
     cx, cy = width / 2.0, height / 2.0
@@ -229,11 +231,12 @@ def _count_seen(
             for b in range(n_bins):
                 ahead_level = r[b] * cos_b[c, s]
                 left = r[b] * sin_b[c, s]
-                found = False
+                best = 0
                 for k in range(n_levels):
                     level = levels[c, s, b, k]
                     if not math.isfinite(level):
                         continue
+                    visible = 0
                     for lift in lifts:
                         dz = level + lift - camera_height
                         ahead = ahead_level * cos_t + dz * sin_t
@@ -249,9 +252,8 @@ def _count_seen(
                             math.isnan(surface)
                             or surface >= math.sqrt(r[b] * r[b] + dz * dz) - tolerance
                         ):
-                            found = True
-                            break
-                    if found:
+                            visible += 1
+                    best = max(best, visible)
+                    if best == len(lifts):
                         break
-                if found:
-                    seen[c, b] += 1.0
+                seen[c, b] += best / len(lifts)

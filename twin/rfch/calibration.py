@@ -47,6 +47,10 @@ CALIBRATION_VERSION = 1
 DEFAULT_BINS = 25
 DEFAULT_PRIOR_WEIGHT = 4.0  # columns of pseudo-sample per bin
 DEFAULT_MAX_ABS_LLR = 4.0  # nats
+# Distance bands of the on-object tables (m). Through the paper's camera (45 degrees over 320
+# pixels) an object 0.15 m wide spans about 39 pixels at 1.5 m, 23 at 2.5 m and 17 at 3.5 m:
+# from more than a 32-pixel patch to half of one, so its match fades band by band.
+DEFAULT_RANGES: tuple[float, ...] = (1.5, 2.5, 3.5)
 
 
 @dataclass(frozen=True)
@@ -65,6 +69,9 @@ class ScoreCalibration:
     max_abs_llr: float = DEFAULT_MAX_ABS_LLR
     auc: float = math.nan
     min_cover: float = 0.25
+    # Distance bands: K-1 increasing edges (m) and, per band, the on-object counts per bin.
+    ranges: tuple[float, ...] = ()
+    range_on_counts: tuple[tuple[int, ...], ...] = ()
 
     def __post_init__(self) -> None:
         edges = tuple(float(e) for e in self.edges)
@@ -88,10 +95,23 @@ class ScoreCalibration:
             raise InputError(f"prior_weight must be > 0 columns, got {self.prior_weight!r}")
         if not (math.isfinite(self.max_abs_llr) and self.max_abs_llr > 0.0):
             raise InputError(f"max_abs_llr must be > 0, got {self.max_abs_llr!r}")
+        ranges = tuple(float(r) for r in self.ranges)
+        by_range = tuple(tuple(int(c) for c in row) for row in self.range_on_counts)
+        if by_range and (
+            len(by_range) != len(ranges) + 1 or any(len(row) != len(on) for row in by_range)
+        ):
+            raise InputError(
+                f"calibration has {len(ranges)} range edges but {len(by_range)} rows of "
+                "on-object counts; give one row of counts per distance band"
+            )
+        if any(b <= a for a, b in itertools.pairwise(ranges)) or any(r <= 0 for r in ranges):
+            raise InputError("calibration ranges must be increasing positive distances (m)")
         object.__setattr__(self, "edges", edges)
         object.__setattr__(self, "on_counts", on)
         object.__setattr__(self, "off_counts", off)
         object.__setattr__(self, "auc", float(self.auc))
+        object.__setattr__(self, "ranges", ranges)
+        object.__setattr__(self, "range_on_counts", by_range)
 
     # ---------------------------------------------------------------- building
     @classmethod
@@ -103,12 +123,16 @@ class ScoreCalibration:
         prior_weight: float = DEFAULT_PRIOR_WEIGHT,
         max_abs_llr: float = DEFAULT_MAX_ABS_LLR,
         min_cover: float = 0.25,
+        distances: np.ndarray | None = None,
+        ranges: Sequence[float] = DEFAULT_RANGES,
     ) -> ScoreCalibration:
         """Histogram column ``scores`` (in [0, 1]) by ``truth`` (1 on, 0 off, -1 left out).
 
         ``bins``: a number of equal bins over [0, 1], or explicit increasing edges. Scores
         outside the edges count in the end bins. ``min_cover`` is recorded, not used: it is the
-        ``column_truth`` setting that made ``truth``.
+        ``column_truth`` setting that made ``truth``. ``distances`` (metres, one per column:
+        how far the object was from the camera) split the on-object columns into the distance
+        bands that ``ranges`` (increasing metres) cut, one table per band.
         """
         from twin.rfch.roc import roc_curve
 
@@ -133,6 +157,18 @@ class ScoreCalibration:
         n_bins = len(edges) - 1
         on = np.bincount(index[positive], minlength=n_bins)
         off = np.bincount(index[~positive], minlength=n_bins)
+        by_range: tuple[tuple[int, ...], ...] = ()
+        if distances is not None:
+            distances = np.asarray(distances, dtype=float).ravel()
+            if distances.shape != truth.shape:
+                raise InputError(
+                    f"got {distances.size} distances for {truth.size} columns; give one per column"
+                )
+            band = np.searchsorted(np.asarray(ranges, dtype=float), distances[keep], side="right")
+            by_range = tuple(
+                tuple(np.bincount(index[positive & (band == k)], minlength=n_bins).tolist())
+                for k in range(len(ranges) + 1)
+            )
         auc = math.nan
         if positive.any() and (~positive).any():
             auc = roc_curve(scores, positive.astype(np.int8)).auc
@@ -144,6 +180,8 @@ class ScoreCalibration:
             max_abs_llr,
             auc,
             min_cover,
+            tuple(ranges) if by_range else (),
+            by_range,
         )
 
     # ---------------------------------------------------------------- the table
@@ -159,10 +197,22 @@ class ScoreCalibration:
         """(B,) LLR per bin in nats: smoothed, made non-decreasing, clipped (module docstring)."""
         return self._table.copy()
 
+    def range_tables(self) -> np.ndarray:
+        """(K, B) LLR per distance band and bin (each band's on-object columns against all the
+        off-object ones, made the same way as ``table``); (0, B) without bands."""
+        return np.array([self._llr(row) for row in self.range_on_counts]).reshape(
+            len(self.range_on_counts), len(self.on_counts)
+        )
+
     @cached_property
     def _table(self) -> np.ndarray:
-        on = np.asarray(self.on_counts, dtype=float)
+        return self._llr(self.on_counts)
+
+    def _llr(self, on_counts: Sequence[int]) -> np.ndarray:
+        on = np.asarray(on_counts, dtype=float)
         off = np.asarray(self.off_counts, dtype=float)
+        if on.sum() == 0:
+            return np.zeros(len(on))  # no object seen at this distance: no evidence either way
         n_on, n_off = on.sum(), off.sum()
         total = n_on + n_off
         # Pseudo-counts split by class totals: the pseudo-sample alone has LLR 0 in every bin.
@@ -188,7 +238,12 @@ class ScoreCalibration:
 
     def rule(self) -> Calibrated:
         """The ``calibrated`` fusion rule with this table (plain numbers, for twin.core)."""
-        return Calibrated(edges=self.edges, llr=tuple(self.table().tolist()))
+        return Calibrated(
+            edges=self.edges,
+            llr=tuple(self.table().tolist()),
+            ranges=self.ranges,
+            range_llr=tuple(tuple(row) for row in self.range_tables().tolist()),
+        )
 
     # ---------------------------------------------------------------- files and reports
     def to_json(self) -> dict[str, Any]:
@@ -204,6 +259,8 @@ class ScoreCalibration:
             "auc": None if math.isnan(self.auc) else self.auc,
             "min_cover": self.min_cover,
             "llr": self.table().tolist(),
+            "ranges": list(self.ranges),
+            "range_on_counts": [list(row) for row in self.range_on_counts],
         }
 
     @classmethod
@@ -226,6 +283,8 @@ class ScoreCalibration:
                 float(data["max_abs_llr"]),
                 math.nan if auc is None else float(auc),
                 float(data["min_cover"]),
+                tuple(data.get("ranges", ())),
+                tuple(tuple(row) for row in data.get("range_on_counts", ())),
             )
         except (KeyError, TypeError, ValueError) as exc:
             raise InputError(f"bad {CALIBRATION_KIND} record ({exc}); re-measure it") from exc
@@ -262,6 +321,16 @@ class ScoreCalibration:
             strict=True,
         ):
             lines.append(f"[{lo:.3f}, {hi:.3f})  {on:5d}  {off:6d}  {value:+6.2f}")
+        if self.range_on_counts:
+            bounds = [0.0, *self.ranges, math.inf]
+            names = [f"{a:g}-{b:g} m" for a, b in itertools.pairwise(bounds)]
+            counts = zip(names, self.range_on_counts, strict=True)
+            bands = ", ".join(f"{name} ({sum(row)} on)" for name, row in counts)
+            lines.append(f"LLR by the object's distance: {bands}")
+            for (lo, hi), *values in zip(
+                itertools.pairwise(self.edges), *self.range_tables(), strict=True
+            ):
+                lines.append(f"[{lo:.3f}, {hi:.3f})  " + "  ".join(f"{v:+6.2f}" for v in values))
         return "\n".join(lines)
 
 

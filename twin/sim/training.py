@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
+from typing import NamedTuple
 
 import mujoco
 import numpy as np
@@ -85,6 +86,14 @@ def training_views(
     return np.stack(images), np.stack(masks)
 
 
+class CalibrationViews(NamedTuple):
+    """Frames for a score calibration, their target masks and the target's distance (m)."""
+
+    images: np.ndarray
+    masks: np.ndarray
+    distances: np.ndarray
+
+
 def calibration_views(
     scene: str = "living_room",
     target: str | None = None,
@@ -95,7 +104,7 @@ def calibration_views(
     min_distance: float = 0.6,
     width: int = PAPER_CAMERA.width,
     height: int = PAPER_CAMERA.height,
-) -> tuple[np.ndarray, np.ndarray]:
+) -> CalibrationViews:
     """Head-camera frames of ``scene`` with the target at random furniture tops, and its masks.
 
     For each placement i (``rng = np.random.default_rng(seed + i)``; keep ``seed`` in the
@@ -107,8 +116,9 @@ def calibration_views(
     view (so it lands anywhere across the frame, or is hidden behind furniture); the others
     face a uniformly random direction and mostly miss it, as most survey views do.
 
-    Returns ``images`` (N, H, W, 3) uint8 RGB and ``masks`` (N, H, W) bool (the target's
-    pixels, from segmentation), N = n_placements x views_per_placement, placement-major.
+    Returns ``images`` (N, H, W, 3) uint8 RGB, ``masks`` (N, H, W) bool (the target's pixels,
+    from segmentation) and ``distances`` (N,) metres in the plan from the robot to the target,
+    N = n_placements x views_per_placement, placement-major.
     """
     if n_placements < 1 or views_per_placement < 1:
         raise InputError(
@@ -126,7 +136,7 @@ def calibration_views(
     obstacles = [world.footprint(name).polygon for name in world.furniture()]
     half_fov = 0.5 * PAPER_CAMERA.hfov
     aimed = round(aimed_fraction * views_per_placement)
-    images, masks = [], []
+    images, masks, distances = [], [], []
     with FrameRenderer(world.model, width, height, CAMERA_NAME) as renderer:
         for i in range(n_placements):
             rng = np.random.default_rng(seed + i)
@@ -141,7 +151,8 @@ def calibration_views(
                 robot.place(Pose2D(x, y, float(yaw)), settle=0.0)
                 images.append(renderer.render(world.data))
                 masks.append(np.isin(renderer.segment(world.data), geoms))
-    return np.stack(images), np.stack(masks)
+                distances.append(math.dist((x, y), (spot.x, spot.y)))
+    return CalibrationViews(np.stack(images), np.stack(masks), np.array(distances))
 
 
 def _free_floor_point(
