@@ -16,6 +16,7 @@ import pytest
 from twin.app.config import MissionConfig, load_config
 from twin.app.mission import Checkpoint, Mission, MissionState, PoseGate
 from twin.app.survey import plan_views, run_survey
+from twin.app.view_log import ViewLog
 from twin.cli import main
 from twin.core.devices import VCC4_LIMITS, Base, Camera, Frame, PanTilt, Robot
 from twin.core.errors import TwinError
@@ -443,6 +444,9 @@ def test_an_interrupted_survey_writes_its_results_and_resumes(
     assert result["status"] == "complete" and result["views"] == 24
     assert result["robot_time_s"] > stopped["robot_time_s"]  # the clock went on, not from 0
     assert (out / "recording-resumed-1.rrd").is_file()
+    # The view log went on too: all 24 views, and the confidence counts every one of them.
+    assert len(ViewLog.load(out / "views.npz")) == 24
+    assert 0.0 <= result["objects"]["rice_box"]["confidence"] <= 1.0
     resumed = AccumulatorGrid.load(out / "grid.npz").layer("rice_box")
     straight = AccumulatorGrid.load(reduced_run / "grid.npz").layer("rice_box")
     # The resumed robot reaches each stop by another path and localizes there anew, so its
@@ -455,6 +459,38 @@ def test_an_interrupted_survey_writes_its_results_and_resumes(
         )
         <= 0.1 + 1e-9
     )
+
+
+def test_the_run_logs_its_views_and_they_fuse_again_into_its_grid(reduced_run):
+    grid = AccumulatorGrid.load(reduced_run / "grid.npz")
+    log = ViewLog.load(reduced_run / "views.npz")
+    assert len(log) == 24
+    again = AccumulatorGrid(grid.objects, grid.spec, grid.rules, grid.supersample)
+    log.fuse_into(again)
+    np.testing.assert_array_equal(again.evidence("rice_box"), grid.evidence("rice_box"))
+    # The twin's depth hid something in some columns and showed the open room in others.
+    profiles = np.concatenate([v.visibility.profiles.ravel() for v in log.views])
+    assert (profiles == 0).mean() > 0.05 and (profiles == 1).mean() > 0.2
+
+
+def test_the_result_says_how_sure_it_is_from_the_calibrated_belief(reduced_run):
+    from twin.app.config import load_config
+    from twin.app.detection import prepare_detector
+    from twin.core.confidence import confidence_within, posterior
+
+    box = read_result(reduced_run)["objects"]["rice_box"]
+    config = load_config(reduced_run / "config.toml")
+    detector = prepare_detector(config.objects, config.detector, config.cache, lambda _: None,
+                                calibration_scene=str(config.scene))  # fmt: skip
+    rule = detector.models[0].calibration.rule()
+    belief = AccumulatorGrid(["rice_box"], config.grid.spec, rule, config.grid.supersample)
+    ViewLog.load(reduced_run / "views.npz").fuse_into(belief)
+    options = config.confidence
+    cells, p_absent = posterior(belief.layer("rice_box"), options.temperature, options.p_absent)
+    within = confidence_within(cells, config.grid.spec, tuple(box["estimate_m"]), options.radius_m)
+    assert box["confidence"] == pytest.approx(within, abs=1e-4)
+    assert box["p_absent"] == pytest.approx(p_absent, abs=1e-4)
+    assert box["confidence"] > 0.5  # a reduced survey that finds the box is fairly sure of it
 
 
 def test_resuming_a_finished_run_changes_nothing(reduced_run, capsys):
