@@ -229,3 +229,43 @@ def test_bad_detector_parameters_are_named_at_load(tmp_path):
     message = r"^--set detector.n_clusters: n_clusters must be an integer"
     with pytest.raises(ConfigError, match=message):
         load_config(None, overrides=["detector.n_clusters=many"])
+
+
+def test_visibility_and_confidence_are_typed_tables_checked_at_load():
+    config = load_config(None)
+    assert config.visibility.source == "auto" and config.visibility.supports == "model"
+    assert config.confidence.radius_m == 0.2
+    with pytest.raises(ConfigError, match=r"^--set visibility.source: expected one of"):
+        load_config(None, overrides=["visibility.source=sonar"])
+    with pytest.raises(ConfigError, match=r"^--set confidence.p_absent: expected a number"):
+        load_config(None, overrides=["confidence.p_absent=1.5"])
+    # A real camera gives no depth: the config says what to use instead.
+    with pytest.raises(ConfigError, match=r"visibility.source: a 'opencv' camera gives no depth"):
+        load_config("peoplebot_real", overrides=["visibility.source=depth"])
+    assert load_config("peoplebot_real").visibility.source == "auto"
+
+
+def test_the_calibrated_rule_waits_for_the_models_and_refuses_one_without_calibration():
+    from types import SimpleNamespace
+
+    from twin.app.run import make_grids
+    from twin.core.errors import InputError
+    from twin.core.fusion import make_rule
+
+    config = load_config(None, overrides=["grid.fusion=calibrated", "grid.direction_bins=8"])
+    assert config.grid.rule is None and config.grid.direction_bins == 8
+    table = SimpleNamespace(rule=lambda: make_rule("calibrated", edges=(0, 1), llr=(0.5,)))
+    calibrated = SimpleNamespace(name="rice_box", calibration=table)
+    grid, belief = make_grids(config, SimpleNamespace(models=[calibrated]))
+    assert grid is belief and grid.rule.name == "calibrated" and grid.direction_bins == 8
+    bare = SimpleNamespace(name="rice_box", calibration=None)
+    with pytest.raises(InputError, match="needs each model's score calibration; 'rice_box'"):
+        make_grids(config, SimpleNamespace(models=[bare]))
+    # Another rule runs without one; there is then no confidence.
+    plain = load_config(None)
+    grid, belief = make_grids(plain, SimpleNamespace(models=[bare]))
+    assert grid.rule.name == plain.grid.fusion and belief is None
+    with pytest.raises(ConfigError, match=r"grid.direction_bins: expected a whole number >= 1"):
+        load_config(None, overrides=["grid.direction_bins=0"])
+    with pytest.raises(ConfigError, match=r"grid.direction_bins: expected 1 \(off\) to 64"):
+        load_config(None, overrides=["grid.direction_bins=65"])
