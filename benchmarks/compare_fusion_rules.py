@@ -6,7 +6,9 @@
 Splits the settings into the informative region (P_fp + P_fn < 1: a firing is more likely at the
 object than elsewhere) and the rest, where only a rule told the rates (log-odds) can use the
 detector by inverting it. Prints, per view count, the mean success of each rule and how many
-settings each alternative wins or loses by more than 10 points.
+settings each alternative wins or loses by more than 10 points. A sweep with occluders scores
+each rule blind and knowing what was in view: the latter appear as RULE+visibility, compared
+with the blind accumulate rule.
 """
 
 from __future__ import annotations
@@ -20,13 +22,16 @@ def main(path: str) -> None:
     rate: dict[tuple[str, float, float, int], float] = {}
     with open(path, encoding="utf-8") as handle:
         for row in csv.DictReader(handle):
-            key = (row["fusion"], float(row["pfp"]), float(row["pfn"]), int(row["views"]))
+            rule = row["fusion"]
+            if row.get("visibility", "none") != "none":
+                rule = f"{rule}+visibility"
+            key = (rule, float(row["pfp"]), float(row["pfn"]), int(row["views"]))
             rate[key] = float(row["success_rate"])
     rules = sorted({k[0] for k in rate})
     views = sorted({k[3] for k in rate})
     settings = sorted({(k[1], k[2]) for k in rate})
     if "accumulate" not in rules:
-        sys.exit("results.csv has no accumulate rows to compare against")
+        sys.exit("results.csv has no (blind) accumulate rows to compare against")
     regions = {
         "informative (P_fp + P_fn < 1)": [s for s in settings if s[0] + s[1] < 1 - 1e-9],
         "uninformative or inverted (P_fp + P_fn >= 1)": [

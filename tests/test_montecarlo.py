@@ -11,12 +11,17 @@ import pytest
 
 from twin.app.executors import InlineExecutor, ProcessExecutor
 from twin.app.montecarlo import (
+    _NO_SCORES,
     RESULT_COLUMNS,
+    ScoreModel,
     SweepConfig,
     SweepJournal,
+    _fuse_view,
     _wedge_meets_cell,
+    _wedge_values,
     draw_trial,
     evidence_layers,
+    in_view,
     run_setting,
     run_sweep,
     run_trial,
@@ -26,6 +31,7 @@ from twin.app.montecarlo import (
 from twin.app.plots import _diagonal_triangles, draw_figure3, draw_figure3_3d
 from twin.cli import main
 from twin.core import fusion
+from twin.core.coverage import add_coverage
 from twin.core.errors import InputError
 from twin.core.grid import AccumulatorGrid, GridSpec
 
@@ -470,3 +476,233 @@ def test_an_interrupted_sweep_command_writes_the_finished_settings(tmp_path, mon
     assert main(argv) == 0
     with (tmp_path / "mc" / "results.csv").open() as handle:
         assert {r["pfp"] for r in csv.DictReader(handle)} == {"0.0", "0.5"}
+
+
+# -- occluders, continuous scores, the kernel's arithmetic ------------------------------------
+
+
+def segment_blocked(occluded, px, py, col, row):
+    """Brute force: whether the segment to the centre of (col, row) meets any occluder cell's
+    square other than the target's (exact slab test per cell)."""
+    tx, ty = col + 0.5, row + 0.5
+    for r, c in zip(*np.nonzero(occluded), strict=True):
+        if (r, c) == (row, col):
+            continue
+        t0, t1 = 0.0, 1.0
+        for p, d, lo in ((px, tx - px, c), (py, ty - py, r)):
+            if d == 0.0:
+                if not lo <= p <= lo + 1:
+                    t0, t1 = 1.0, 0.0
+                continue
+            a, b = sorted(((lo - p) / d, (lo + 1 - p) / d))
+            t0, t1 = max(t0, a), min(t1, b)
+        if t0 < t1:
+            return True
+    return False
+
+
+def test_in_view_is_the_exact_line_of_sight_to_a_cell_centre():
+    rng = np.random.default_rng(4)
+    for _ in range(30):
+        occluded = rng.random((12, 12)) < 0.2
+        free = np.argwhere(~occluded)
+        row, col = free[rng.integers(len(free))]
+        px, py = col + rng.random(), row + rng.random()
+        for r in range(12):
+            for c in range(12):
+                if (r, c) == (row, col):
+                    continue
+                seen = in_view(occluded, px, py, c, r)
+                assert seen == (not segment_blocked(occluded, px, py, c, r)), (px, py, c, r)
+
+
+def test_the_sweep_kernel_adds_exactly_what_add_coverage_adds():
+    # The same floats to the last bit: the normalized rule's min_observed compares sums of
+    # coverage with whole numbers, where a different summation order changes the result.
+    rng = np.random.default_rng(8)
+    n, s, wedges = 20, 10, 8
+    weights = np.stack([rng.choice([0.0, 1.0], wedges), rng.normal(size=wedges),
+                        np.ones(wedges)])  # fmt: skip
+    expected = np.zeros((3, n, n))
+    got = np.zeros((3, n, n))
+    scratch = (
+        np.empty((n, n), np.int8),
+        np.empty(n * s),
+        np.empty((wedges, 4, n * s), np.int64),
+        np.empty((wedges, 4, n * s), np.int64),
+    )
+    for view in range(40):
+        px, py = rng.uniform(0, n, size=2)
+        if view == 0:
+            py = 7.25  # a sample row through the robot
+        top = rng.uniform(-math.pi, math.pi) + math.pi / 8 - np.arange(wedges) * math.pi / 32
+        a0, a1 = top - math.pi / 32, top
+        add_coverage(expected, px, py, a0, a1, weights, 0.0, 0.0, 1.0, s, 0.0)
+        _fuse_view(got, px, py, a0, a1, weights, s, False, np.zeros((n, n), bool), *scratch)
+        assert np.array_equal(got, expected)
+
+
+def test_knowing_visibility_in_an_open_world_changes_nothing():
+    n, s, wedges = 20, 10, 8
+    weights = np.stack([np.linspace(-1, 1, wedges), np.ones(wedges)])
+    state = np.zeros((4, n, n))
+    known = np.full((n, n), -1, np.int8)
+    scratch = (np.empty(n * s), np.empty((wedges, 4, n * s), np.int64),
+               np.empty((wedges, 4, n * s), np.int64))  # fmt: skip
+    top = 0.3 - np.arange(wedges) * 0.1
+    _fuse_view(state, 5.5, 6.2, top - 0.1, top, weights, s, True, np.zeros((n, n), bool), known,
+               *scratch)  # fmt: skip
+    np.testing.assert_array_equal(state[2:], state[:2])
+
+
+def wall_world(config):
+    """A trial with a wall of occluders at column 10 (rows 0..18) between the robot, always
+    at x < 10, and the object at (row 9, col 15)."""
+    n = config.grid
+    occluded = np.zeros((n, n), bool)
+    occluded[: n - 1, 10] = True
+    views = config.checkpoints[-1]
+    rng = np.random.default_rng(1)
+    x, y = rng.uniform(0, 10, views), rng.uniform(0, n - 1, views)
+    yaw = np.arctan2(9.5 - y, 15.5 - x)  # looking straight at the object
+    return occluded, x, y, yaw
+
+
+def test_an_object_behind_an_occluder_is_not_seen():
+    config = SweepConfig(pfp=(0.0,), pfn=(0.0,), views=(30,), occluders=0.05)
+    occluded, x, y, yaw = wall_world(config)
+    values = np.empty((30, config.wedges))
+    fire = np.zeros((30, config.wedges))  # a wedge that sees the object fires for sure
+    args = (config.fov, config.wedges, 9, 15, x, y, yaw, fire, 0.0, 0.0)
+    _wedge_values(*args, occluded, True, _NO_SCORES, _NO_SCORES, False, values)
+    reached_over = y >= config.grid - 2  # only the top row's gap in the wall shows the object
+    assert not values[~reached_over].any()
+    _wedge_values(*args, np.zeros_like(occluded), True, _NO_SCORES, _NO_SCORES, False, values)
+    assert values.any(axis=1).all()  # without the wall every view sees it
+
+
+def test_occluders_are_drawn_apart_from_the_object_and_the_robot():
+    config = SweepConfig(views=(200,), occluders=0.2)
+    for trial in range(5):
+        d = draw_trial(config, trial_rng(0, 0.1, 0.1, trial))
+        assert d.occluded.sum() == config.occluder_count == 80
+        assert not d.occluded[d.object_row, d.object_col]
+        assert not d.occluded[np.floor(d.y).astype(int), np.floor(d.x).astype(int)].any()
+
+
+def test_without_occluders_the_sweep_draws_and_writes_exactly_the_papers(tmp_path):
+    paper = SweepConfig(pfp=(0.3,), pfn=(0.5,), views=(8,), trials=2)
+    assert paper == SweepConfig(pfp=(0.3,), pfn=(0.5,), views=(8,), trials=2, occluders=0.0,
+                                scores="binary")  # fmt: skip
+    assert paper.evaluations == (("accumulate", "none"), ("normalized", "none"),
+                                 ("logodds", "none"))  # fmt: skip
+    assert paper.result_columns == RESULT_COLUMNS
+    a = draw_trial(paper, trial_rng(0, 0.3, 0.5, 1))
+    rng = trial_rng(0, 0.3, 0.5, 1)  # the draws as the paper's sweep made them
+    assert (a.object_row, a.object_col) == tuple(int(v) for v in rng.integers(1, 19, size=2))
+    cell = rng.integers(0, 399, size=8)
+    cell += cell >= a.object_row * 20 + a.object_col
+    np.testing.assert_array_equal(a.x, cell % 20 + rng.random((8, 2))[:, 0])
+    assert not a.occluded.any()
+    journal = SweepJournal(tmp_path / "settings.jsonl", paper)
+    header = json.loads((tmp_path / "settings.jsonl").read_text().splitlines()[0])["sweep"]
+    assert set(header) == {"fusion", "trials", "wedges", "fov", "grid", "supersample", "seed",
+                           "min_observed", "checkpoints"}  # fmt: skip
+    assert journal.done == {}
+
+
+FOGGY = SweepConfig(pfp=(0.1,), pfn=(0.1,), views=(75,), trials=100, occluders=0.15, seed=1)
+
+
+def test_with_occluders_the_probabilistic_rule_loses_blind_and_wins_knowing_what_it_saw():
+    result = run_setting(FOGGY, (0.1, 0.1))
+    rates = dict(zip(FOGGY.evaluations, result.successes[:, 0] / FOGGY.trials, strict=True))
+    assert rates[("logodds", "known")] > rates[("logodds", "none")] + 0.25
+    assert rates[("logodds", "known")] > rates[("accumulate", "none")] + 0.25
+    rows = result.rows()
+    assert {(r["fusion"], r["visibility"]) for r in rows} == set(FOGGY.evaluations)
+
+
+def test_scores_rates_and_calibration_are_the_beta_distributions():
+    stats = pytest.importorskip("scipy.stats")
+    model = ScoreModel(on=(4.0, 8.0), off=(2.0, 20.0))
+    for threshold in (0.05, 0.16, 0.4):
+        pfp, pfn = model.rates(threshold)
+        assert pfp == pytest.approx(stats.beta.sf(threshold, 2, 20), abs=1e-7)
+        assert pfn == pytest.approx(stats.beta.cdf(threshold, 4, 8), abs=1e-7)
+    edges, llr = model.calibration(50)
+    assert len(edges) == 51 and len(llr) == 50
+    on = np.diff(stats.beta.cdf(edges[:21], 4, 8))  # beyond 0.4 the off mass is ~1e-10 and
+    off = np.diff(stats.beta.cdf(edges[:21], 2, 20))  # the CDF's differences lose it
+    np.testing.assert_allclose(llr[:20], np.log(on / off), atol=1e-6)
+    assert np.all(np.isfinite(llr)) and np.all(np.diff(llr) > 0)  # more on-like as it rises
+
+
+SCORED = SweepConfig(views=(25,), trials=200, scores="beta", thresholds=(0.16, 0.35),
+                     fusion=("accumulate", "normalized", "logodds", "calibrated"))  # fmt: skip
+
+
+def test_continuous_scores_get_their_own_layers():
+    @dataclass(frozen=True)
+    class Fired:  # the paper's weights on 0 and 1, another weight for a score of 0.3
+        name: ClassVar[str] = "fired"
+
+        def column_weights(self, values):
+            return (np.asarray(values) >= 0.5).astype(float)
+
+        def read(self, evidence, observed):
+            return evidence
+
+    rules = (*sweep_rules(SCORED, *SCORED.settings()[0]), Fired())
+    assert evidence_layers(rules)[1] == (0, 0, 1, 2, 0)  # on [0, 1] fired weighs as the paper
+    assert evidence_layers(rules, np.array([0.0, 0.3, 1.0]))[1] == (0, 0, 1, 2, 3)
+    binary = sweep_rules(SweepConfig(fusion=("logodds", "calibrated")), 0.2, 0.3)
+    assert evidence_layers(binary)[1] == (0, 0)  # a binary detector's LLR is logodds' weights
+
+
+def test_the_calibrated_rule_beats_a_thresholded_detector_on_the_same_worlds():
+    low, high = (run_setting(SCORED, s) for s in SCORED.settings())
+    rates = {t: dict(zip(SCORED.fusion, r.successes[:, 0] / SCORED.trials, strict=True))
+             for t, r in ((0.16, low), (0.35, high))}  # fmt: skip
+    for rule in ("accumulate", "normalized", "calibrated"):  # the threshold changes no world
+        assert rates[0.16][rule] == rates[0.35][rule]
+    assert rates[0.35]["calibrated"] > rates[0.35]["logodds"] + 0.08
+    assert rates[0.16]["calibrated"] >= rates[0.16]["logodds"]
+    assert (low.threshold, high.threshold) == (0.16, 0.35)
+    assert low.pfp == pytest.approx(0.13, abs=0.01) and low.pfn == pytest.approx(0.08, abs=0.01)
+
+
+def test_command_with_occluders_and_scores_writes_their_columns(tmp_path, capsys):
+    out = tmp_path / "fog"
+    argv = ["montecarlo", "--pfp", "0.1", "--pfn", "0.1,0.3", "--views", "5", "--trials", "2",
+            "--occluders", "0.1", "--workers", "1", "--out", str(out)]  # fmt: skip
+    assert main(argv) == 0
+    with (out / "results.csv").open() as handle:
+        reader = csv.DictReader(handle)
+        rows = list(reader)
+    assert reader.fieldnames[:2] == ["fusion", "visibility"]
+    assert {r["visibility"] for r in rows} == {"none", "known"} and len(rows) == 3 * 2 * 2
+    assert "logodds+visibility" in capsys.readouterr().out
+    out = tmp_path / "scores"
+    argv = ["montecarlo", "--scores", "beta", "--threshold", "0.2,0.3", "--views", "5",
+            "--trials", "2", "--fusion", "logodds,calibrated", "--workers", "1", "--out",
+            str(out)]  # fmt: skip
+    assert main(argv) == 0
+    with (out / "results.csv").open() as handle:
+        rows = list(csv.DictReader(handle))
+    assert {r["threshold"] for r in rows} == {"0.2", "0.3"}
+    assert (out / "thresholds.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert "t=0.2" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize(
+    ("argv", "match"),
+    [(["--scores", "beta", "--pfp", "0.1"], "with --scores beta the rates follow"),
+     (["--occluders", "0.95"], "--occluders must be a fraction"),
+     (["--scores", "beta", "--score-off", "0.5,2"], "--score-off must be Beta shape"),
+     (["--scores", "beta", "--threshold", "0,0.5"], "--threshold must be distinct values")],
+)  # fmt: skip
+def test_bad_occluder_and_score_options_are_one_line_errors(tmp_path, capsys, argv, match):
+    code = main(["montecarlo", "--trials", "1", "--out", str(tmp_path / "x"), *argv])
+    err = capsys.readouterr().err.strip()
+    assert code == 2 and match in err and len(err.splitlines()) == 1

@@ -8,9 +8,10 @@ cell's corners) fires with probability 1 - P_fn, any other wedge with probabilit
 wedge has value 1.
 
 The rules are ``twin.core.fusion``'s, named by ``--fusion`` (any registered rule, with the
-parameters this sweep can supply: the setting's true P_fp and P_fn, and --min-observed). Each
-rule's weights for a silent and a fired wedge (``column_weights([0, 1])``) name an evidence
-layer; rules with the same weights share one, and all share the ``observed`` layer, so one
+parameters this sweep can supply: the setting's true P_fp and P_fn, --min-observed and, with
+scores, the threshold and the score model's exact log-likelihood ratios). Each rule's weights of
+the trials' wedge values (``column_weights``) name an evidence layer; rules whose weights agree
+on every value of a batch of trials share one, and all share the ``observed`` layer, so one
 coverage pass per view updates every rule. The layers are copied at each checkpoint, and each
 rule's element-wise ``read`` turns a whole batch of trials x checkpoints into confidence maps.
 
@@ -20,10 +21,32 @@ object's cell or one of its 8 neighbours. Cells within 1e-9 (relative) of the ma
 ties are broken uniformly at random with one draw per checkpoint shared by all rules, so a flat
 grid scores chance (about 9 / n^2), not a bias toward a corner.
 
+Beyond the paper (both off by default, which leaves its results unchanged):
+
+* **Occluders** (``occluders``: a fraction of the cells): that many blocking cells, uniformly
+  among the cells other than the object's, per trial; the robot never stands in one. A cell is
+  in view from the robot when the segment to its centre crosses no occluder cell (the cell
+  itself aside: an occluder's near face is seen). The object is seen by a wedge when the wedge
+  meets its cell and its centre is in view; a hidden object's wedge behaves as any other
+  (fires with P_fp, or draws an off-object score). Every rule is then evaluated twice from the
+  same coverage pass: ``visibility=none`` (blind, as the paper: the whole wedge updates) and
+  ``visibility=known`` (a wedge updates only the cells in view: the exact per-cell test above,
+  i.e. what the twin's ``ColumnVisibility`` approximates by profiles over distance).
+* **Scores** (``scores="beta"``): a wedge's value is a continuous detector score, drawn from
+  Beta(``score_on``) when the wedge sees the object and Beta(``score_off``) otherwise (defaults
+  resembling the RFCH column scores measured on the twin's frames). The settings are then
+  ``thresholds``: each gives ``logodds`` a detector that fires at value >= threshold, with the
+  (P_fp, P_fn) that threshold has under the two distributions (the setting's rates in the
+  results); ``calibrated`` gets the exact log-likelihood ratio log(p_on(v) / p_off(v)) of the
+  two distributions in ``SCORE_BINS`` equal bins of value. The paper's rules weigh the value.
+
 Randomness: trial t of setting (P_fp, P_fn) draws everything from
 ``SeedSequence(seed, spawn_key=(P_fp in 1e-9, P_fn in 1e-9, t))``, so a result depends only on
 the seed, the setting and the trial index: not on the number of workers, the order in which
-settings run, or which other settings are in the sweep.
+settings run, or which other settings are in the sweep. With scores, a trial draws from
+``SeedSequence(seed, spawn_key=(SCORES_KEY, t))``: the threshold only decides what ``logodds``
+sees, so every threshold is scored on the same worlds. Occluders are drawn first (only when
+there are any), so a sweep without them draws exactly what the paper's did.
 """
 
 from __future__ import annotations
@@ -35,16 +58,24 @@ import json
 import math
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
-from functools import partial
+from functools import lru_cache, partial
 from pathlib import Path
 
 import numpy as np
 from numba import njit
 
 from twin.app.executors import Executor
-from twin.core.coverage import add_coverage
+
+# The coverage kernel's own wedge splitting and sample-index rules, so that this sweep's counts
+# of a wedge's sample points in a cell are exactly ``add_coverage``'s.
+from twin.core.coverage import (
+    _contains_angle,
+    _first_index_after,
+    _first_index_at_or_after,
+    wedge_pieces,
+)
 from twin.core.errors import InputError, TwinError
-from twin.core.fusion import RULES, FusionRule, make_rule
+from twin.core.fusion import RULES, FusionRule, logodds_weights, make_rule
 from twin.core.store import JsonLinesJournal, write_text_atomic
 
 DEFAULT_RATES: tuple[float, ...] = tuple(round(0.1 * i, 1) for i in range(11))
@@ -60,15 +91,89 @@ RESULT_COLUMNS: tuple[str, ...] = (
     "successes",
     "success_rate",
 )
+# How each rule is evaluated with occluders: blind (the paper's), or updating only cells in view.
+VISIBILITIES: tuple[str, ...] = ("none", "known")
+SCORES: tuple[str, ...] = ("binary", "beta")
+# Beta(a, b) of a wedge's score on and off the object: like the RFCH column scores measured on
+# the twin's frames (off mostly 0.02-0.15 with a tail to 0.3; on mostly 0.15-0.6).
+DEFAULT_SCORE_ON: tuple[float, float] = (4.0, 8.0)
+DEFAULT_SCORE_OFF: tuple[float, float] = (2.0, 20.0)
+# Near the threshold the RFCH detector is run at (0.162: P_fp 0.10, P_fn 0.05 on rendered frames).
+DEFAULT_THRESHOLDS: tuple[float, ...] = (0.16,)
+# Equal bins of value over [0, 1] in which ``calibrated`` is given the score model's LLR.
+SCORE_BINS = 200
+# A bin's probability below this counts as this, so its LLR stays finite (|LLR| <= ~690).
+_MASS_FLOOR = 1e-300
+# Trials with scores are keyed apart from any (P_fp, P_fn) key (those are at most 1e9).
+SCORES_KEY = 2**32
+# At most this share of the cells may block: the object and the robot need free cells.
+MAX_OCCLUDERS = 0.9
 _TIE_RTOL = 1e-9
 _RATE_KEY_SCALE = 1e9
 # Checkpoint copies of the layers (and confidence maps) of one batch of trials stay below this.
 _BATCH_BYTES = 32 * 1024 * 1024
+_CDF_POINTS = 1 << 16  # trapezoid intervals over [0, 1] for a Beta CDF (error ~1e-9)
+# Gauss-Legendre nodes per LLR bin: exact for integer shapes (polynomial densities) to a + b = 33.
+_BIN_POINTS = 16
+
+
+def _beta_pdf(a: float, b: float, x: np.ndarray) -> np.ndarray:
+    """Density of Beta(a, b) at ``x`` in [0, 1], for a, b >= 1 (bounded, 0 or finite at ends)."""
+    norm = math.lgamma(a) + math.lgamma(b) - math.lgamma(a + b)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        log_x = np.where(x > 0.0, (a - 1.0) * np.log(x), 0.0 if a == 1.0 else -np.inf)
+        log_1mx = np.where(x < 1.0, (b - 1.0) * np.log1p(-x), 0.0 if b == 1.0 else -np.inf)
+    return np.exp(log_x + log_1mx - norm)
+
+
+@lru_cache(maxsize=16)
+def _beta_cdf_table(a: float, b: float) -> tuple[np.ndarray, np.ndarray]:
+    """(x, CDF(x)) of Beta(a, b) on ``_CDF_POINTS`` intervals (trapezoids, normalized to 1)."""
+    x = np.linspace(0.0, 1.0, _CDF_POINTS + 1)
+    pdf = _beta_pdf(a, b, x)
+    cdf = np.concatenate([[0.0], np.cumsum(0.5 * (pdf[1:] + pdf[:-1]))])
+    return x, cdf / cdf[-1]
+
+
+@dataclass(frozen=True)
+class ScoreModel:
+    """A continuous detector: a wedge's value is Beta(``on``) when it sees the object, else
+    Beta(``off``); each a (a, b) shape pair with a, b >= 1."""
+
+    on: tuple[float, float] = DEFAULT_SCORE_ON
+    off: tuple[float, float] = DEFAULT_SCORE_OFF
+
+    def rates(self, threshold: float) -> tuple[float, float]:
+        """(P_fp, P_fn) of the detector that fires at value >= ``threshold``."""
+        x, off = _beta_cdf_table(*self.off)
+        _, on = _beta_cdf_table(*self.on)
+        return 1.0 - float(np.interp(threshold, x, off)), float(np.interp(threshold, x, on))
+
+    def calibration(self, bins: int = SCORE_BINS) -> tuple[tuple[float, ...], tuple[float, ...]]:
+        """(edges, llr): ``bins`` equal bins of value over [0, 1] (``bins + 1`` edges) and each
+        bin's log(P_on(bin) / P_off(bin)), the exact LLR of a value known to its bin."""
+        return _calibration(self, bins)
+
+
+@lru_cache(maxsize=16)
+def _calibration(model: ScoreModel, bins: int) -> tuple[tuple[float, ...], tuple[float, ...]]:
+    edges = np.linspace(0.0, 1.0, bins + 1)
+    nodes, node_weights = np.polynomial.legendre.leggauss(_BIN_POINTS)
+    at = edges[:-1, None] + (nodes + 1.0) / (2.0 * bins)  # Gauss-Legendre nodes in each bin
+    on = np.maximum(_beta_pdf(*model.on, at) @ node_weights / (2.0 * bins), _MASS_FLOOR)
+    off = np.maximum(_beta_pdf(*model.off, at) @ node_weights / (2.0 * bins), _MASS_FLOOR)
+    return tuple(edges.tolist()), tuple(np.log(on / off).tolist())
 
 
 @dataclass(frozen=True)
 class SweepConfig:
-    """One Monte Carlo sweep: settings, view counts, the abstract world and the rules."""
+    """One Monte Carlo sweep: settings, view counts, the abstract world and the rules.
+
+    ``occluders`` is the fraction of cells that block (0: the paper's open world); ``scores``
+    is "binary" (the paper's firing wedges, settings ``pfp`` x ``pfn``) or "beta" (continuous
+    values from ``score_on`` / ``score_off``, settings ``thresholds``; ``pfp`` and ``pfn`` are
+    then unused: the rates follow from each threshold).
+    """
 
     pfp: tuple[float, ...] = DEFAULT_RATES
     pfn: tuple[float, ...] = DEFAULT_RATES
@@ -81,6 +186,11 @@ class SweepConfig:
     fusion: tuple[str, ...] = DEFAULT_FUSION
     seed: int = 0
     min_observed: float = 1.0
+    occluders: float = 0.0
+    scores: str = "binary"
+    score_on: tuple[float, float] = DEFAULT_SCORE_ON
+    score_off: tuple[float, float] = DEFAULT_SCORE_OFF
+    thresholds: tuple[float, ...] = DEFAULT_THRESHOLDS
 
     def __post_init__(self) -> None:
         for name in ("pfp", "pfn"):
@@ -99,9 +209,11 @@ class SweepConfig:
         _require(self.supersample >= 1, f"--supersample must be >= 1, got {self.supersample}")
         _require(self.seed >= 0, f"--seed must be a non-negative integer, got {self.seed}")
         unknown = [f for f in self.fusion if f not in RULES]
+        pending = " (calibrated is not in twin.core.fusion yet)" if "calibrated" in unknown else ""
         _require(
             bool(self.fusion) and not unknown,
-            f"--fusion: unknown rule(s) {unknown or self.fusion!r}; choose from {', '.join(RULES)}",
+            f"--fusion: unknown rule(s) {unknown or self.fusion!r}; choose from "
+            f"{', '.join(RULES)}{pending}",
         )
         _require(
             len(set(self.fusion)) == len(self.fusion),
@@ -111,6 +223,28 @@ class SweepConfig:
             math.isfinite(self.min_observed) and self.min_observed >= 0.0,
             f"--min-observed must be a number >= 0 of full-cell views, got {self.min_observed!r}",
         )
+        _require(
+            0.0 <= self.occluders <= MAX_OCCLUDERS,
+            f"--occluders must be a fraction of the cells in [0, {MAX_OCCLUDERS}], "
+            f"got {self.occluders!r}",
+        )
+        _require(
+            self.scores in SCORES,
+            f"--scores must be one of {', '.join(SCORES)}, got {self.scores!r}",
+        )
+        for name in ("score_on", "score_off"):
+            shape = getattr(self, name)
+            flag = "--" + name.replace("_", "-")
+            _require(
+                len(shape) == 2 and all(math.isfinite(p) and p >= 1.0 for p in shape),
+                f"{flag} must be Beta shape parameters A,B >= 1 (a bounded density), got {shape!r}",
+            )
+        _require(
+            bool(self.thresholds)
+            and all(0.0 < t < 1.0 for t in self.thresholds)
+            and len(set(self.thresholds)) == len(self.thresholds),
+            f"--threshold must be distinct values in (0, 1), got {self.thresholds!r}",
+        )
         for pfp, pfn in self.settings():
             sweep_rules(self, pfp, pfn)  # a rule this sweep cannot parametrize fails here
 
@@ -118,37 +252,94 @@ class SweepConfig:
     def checkpoints(self) -> tuple[int, ...]:
         return tuple(sorted(set(self.views)))
 
+    @property
+    def scored(self) -> bool:
+        """Whether wedges carry continuous scores rather than the paper's 0/1."""
+        return self.scores == "beta"
+
+    @property
+    def score_model(self) -> ScoreModel:
+        return ScoreModel(self.score_on, self.score_off)
+
+    @property
+    def visibilities(self) -> tuple[str, ...]:
+        """How each rule is evaluated: blind only, unless occluders can hide anything."""
+        return VISIBILITIES if self.occluders > 0.0 else VISIBILITIES[:1]
+
+    @property
+    def evaluations(self) -> tuple[tuple[str, str], ...]:
+        """(rule, visibility) pairs in the order of a result's rows of successes."""
+        return tuple((rule, v) for rule in self.fusion for v in self.visibilities)
+
+    @property
+    def occluder_count(self) -> int:
+        """Blocking cells per trial (at most all but the object's and one cell for the robot)."""
+        return min(round(self.occluders * self.grid**2), self.grid**2 - 2)
+
+    @property
+    def result_columns(self) -> tuple[str, ...]:
+        """``results.csv``'s columns: the paper's, plus visibility with occluders and the
+        threshold with scores (so a paper's sweep writes exactly the paper's columns)."""
+        extra = ("visibility",) if self.occluders > 0.0 else ()
+        threshold = ("threshold",) if self.scored else ()
+        return RESULT_COLUMNS[:1] + extra + threshold + RESULT_COLUMNS[1:]
+
     def settings(self) -> list[tuple[float, float]]:
+        """(P_fp, P_fn) settings: the grid of rates, or with scores each threshold's rates."""
+        if self.scored:
+            return [self.score_model.rates(t) for t in self.thresholds]
         return [(pfp, pfn) for pfp in self.pfp for pfn in self.pfn]
+
+    def threshold_of(self, setting: tuple[float, float]) -> float | None:
+        """The threshold whose rates ``setting`` is (None without scores)."""
+        if not self.scored:
+            return None
+        return dict(zip(self.settings(), self.thresholds, strict=True))[setting]
+
+    def result(self, setting: tuple[float, float], successes: np.ndarray) -> SettingResult:
+        """A setting's result from its summed successes (len(evaluations), len(checkpoints))."""
+        return SettingResult(
+            *setting, self.trials, self.checkpoints, self.fusion, successes,
+            visibility=self.visibilities, threshold=self.threshold_of(setting),
+        )  # fmt: skip
 
 
 @dataclass(frozen=True)
 class SettingResult:
-    """Successes of every rule at every checkpoint, for one (P_fp, P_fn) setting."""
+    """Successes of every rule at every checkpoint, for one (P_fp, P_fn) setting.
+
+    ``successes`` is (len(fusion) x len(visibility), len(checkpoints)): rule by rule, each
+    rule's visibilities in turn (see ``SweepConfig.evaluations``).
+    """
 
     pfp: float
     pfn: float
     trials: int
     checkpoints: tuple[int, ...]
     fusion: tuple[str, ...]
-    successes: np.ndarray = field(repr=False)  # (len(fusion), len(checkpoints)) ints
+    successes: np.ndarray = field(repr=False)
+    visibility: tuple[str, ...] = VISIBILITIES[:1]
+    threshold: float | None = None
 
     def rows(self) -> list[dict[str, object]]:
         out = []
-        for r, rule in enumerate(self.fusion):
+        pairs = [(rule, v) for rule in self.fusion for v in self.visibility]
+        for r, (rule, visibility) in enumerate(pairs):
             for c, views in enumerate(self.checkpoints):
                 hits = int(self.successes[r, c])
-                out.append(
-                    {
-                        "fusion": rule,
-                        "pfp": self.pfp,
-                        "pfn": self.pfn,
-                        "views": views,
-                        "trials": self.trials,
-                        "successes": hits,
-                        "success_rate": hits / self.trials,
-                    }
-                )
+                row: dict[str, object] = {
+                    "fusion": rule,
+                    "visibility": visibility,
+                    "pfp": self.pfp,
+                    "pfn": self.pfn,
+                    "views": views,
+                    "trials": self.trials,
+                    "successes": hits,
+                    "success_rate": hits / self.trials,
+                }
+                if self.threshold is not None:
+                    row["threshold"] = self.threshold
+                out.append(row)
         return out
 
 
@@ -157,7 +348,7 @@ def _require(condition: bool, message: str) -> None:
         raise InputError(message)
 
 
-def _rule_for(name: str, offered: dict[str, float]) -> FusionRule:
+def _rule_for(name: str, offered: dict[str, object]) -> FusionRule:
     """Rule ``name`` with the parameters its constructor names among ``offered``; the others
     keep their defaults, and one without a default that the sweep cannot supply is an error."""
     accepted = inspect.signature(RULES[name]).parameters
@@ -178,34 +369,59 @@ def _rule_for(name: str, offered: dict[str, float]) -> FusionRule:
 
 def sweep_rules(config: SweepConfig, pfp: float, pfn: float) -> tuple[FusionRule, ...]:
     """The rules of ``config.fusion`` for one setting: each gets, if it takes them, the
-    detector's true rates (``p_fp``, ``p_fn``) and ``min_observed`` (full-cell views)."""
-    offered = {"p_fp": pfp, "p_fn": pfn, "min_observed": config.min_observed}
+    detector's true rates (``p_fp``, ``p_fn``), ``min_observed`` (full-cell views) and its exact
+    log-likelihood ratios by bins of value (``edges``, ``llr``: the binary detector's two, or
+    the score model's); with scores also the setting's ``threshold``."""
+    offered: dict[str, object] = {"p_fp": pfp, "p_fn": pfn, "min_observed": config.min_observed}
+    if config.scored:
+        edges, llr = config.score_model.calibration()
+        offered.update(threshold=config.threshold_of((pfp, pfn)), edges=edges, llr=llr)
+    else:
+        # The binary detector's exact LLR: a silent (0) and a fired (1) bin, logodds' weights.
+        fired, silent = logodds_weights(pfp, pfn)
+        offered.update(edges=(0.0, 0.5, 1.0), llr=(silent, fired))
     return tuple(_rule_for(name, offered) for name in config.fusion)
 
 
-def evidence_layers(rules: Sequence[FusionRule]) -> tuple[np.ndarray, tuple[int, ...]]:
-    """The distinct (silent, fired) weight pairs of ``rules`` as a (layers, 2) array, and the
-    layer of each rule: rules that weight the binary detector alike share one evidence sum."""
-    pairs: list[tuple[float, float]] = []
+def evidence_layers(
+    rules: Sequence[FusionRule], values: np.ndarray = BINARY_VALUES
+) -> tuple[np.ndarray, tuple[int, ...]]:
+    """The distinct weights of ``rules`` for the wedge ``values`` (any shape) as a
+    (layers, *values.shape) array, and the layer of each rule: rules that weight every one of
+    these values alike share one evidence sum (for the binary detector, [0, 1] decides)."""
+    distinct: list[np.ndarray] = []
     layer_of = []
     for rule in rules:
-        weights = np.asarray(rule.column_weights(BINARY_VALUES), dtype=float)
-        if weights.shape != BINARY_VALUES.shape:
+        weights = np.asarray(rule.column_weights(values), dtype=float)
+        if weights.shape != values.shape:
             raise TwinError(
                 f"fusion rule {rule.name!r}: column_weights gave shape {weights.shape} for "
-                f"{BINARY_VALUES.size} values; it must give one weight per column"
+                f"{values.size} values; it must give one weight per column"
             )
-        pair = (float(weights[0]), float(weights[1]))
-        if pair not in pairs:
-            pairs.append(pair)
-        layer_of.append(pairs.index(pair))
-    return np.array(pairs, dtype=float).reshape(-1, 2), tuple(layer_of)
+        same = [k for k, seen in enumerate(distinct) if np.array_equal(seen, weights)]
+        if not same:
+            distinct.append(weights)
+        layer_of.append(same[0] if same else len(distinct) - 1)
+    return np.array(distinct, dtype=float).reshape(-1, *values.shape), tuple(layer_of)
 
 
 def trial_rng(seed: int, pfp: float, pfn: float, trial: int) -> np.random.Generator:
     """The generator of one trial: a function of (seed, setting, trial) only."""
     key = (round(pfp * _RATE_KEY_SCALE), round(pfn * _RATE_KEY_SCALE), trial)
     return np.random.default_rng(np.random.SeedSequence(seed, spawn_key=key))
+
+
+def sweep_trial_rng(config: SweepConfig, pfp: float, pfn: float, trial: int) -> np.random.Generator:
+    """A trial's generator in ``config``'s sweep: ``trial_rng``, or with scores one keyed by the
+    trial alone (the threshold changes no draw)."""
+    if config.scored:
+        return np.random.default_rng(
+            np.random.SeedSequence(config.seed, spawn_key=(SCORES_KEY, trial))
+        )
+    return trial_rng(config.seed, pfp, pfn, trial)
+
+
+_NO_SCORES = np.zeros((0, 0))
 
 
 @dataclass(frozen=True)
@@ -219,17 +435,28 @@ class TrialDraws:
     yaw: np.ndarray  # (V,) radians
     fire: np.ndarray  # (V, wedges) uniforms deciding each wedge's firing
     tie: np.ndarray  # (checkpoints,) uniforms breaking ties
+    occluded: np.ndarray  # (n, n) bools, [row, col]: the blocking cells
+    on: np.ndarray = field(default_factory=lambda: _NO_SCORES)  # (V, wedges) scores on / off
+    off: np.ndarray = field(default_factory=lambda: _NO_SCORES)  # the object; (0, 0): binary
 
 
 def draw_trial(config: SweepConfig, rng: np.random.Generator) -> TrialDraws:
     n = config.grid
     n_views = config.checkpoints[-1]
     object_row, object_col = (int(v) for v in rng.integers(1, n - 1, size=2))
-    # Uniform over the area outside the object's cell: a uniform other cell, then a point in it.
-    cell = rng.integers(0, n * n - 1, size=n_views)
-    cell += cell >= object_row * n + object_col
+    object_cell = object_row * n + object_col
+    occluded = np.zeros((n, n), dtype=np.bool_)
+    if config.occluder_count:  # no draw without occluders: the paper's stream stays as it was
+        blocks = rng.choice(n * n - 1, size=config.occluder_count, replace=False)
+        occluded.flat[blocks + (blocks >= object_cell)] = True
+    # Uniform over the area outside the object's cell and the occluders: a uniform free cell,
+    # then a point in it (without occluders, the k-th cell skipping the object's, as before).
+    blocked = occluded.ravel().copy()
+    blocked[object_cell] = True
+    free = np.flatnonzero(~blocked)
+    cell = free[rng.integers(0, free.size, size=n_views)]
     offset = rng.random((n_views, 2))
-    return TrialDraws(
+    draws = TrialDraws(
         object_row,
         object_col,
         x=cell % n + offset[:, 0],
@@ -237,7 +464,14 @@ def draw_trial(config: SweepConfig, rng: np.random.Generator) -> TrialDraws:
         yaw=rng.uniform(-math.pi, math.pi, size=n_views),
         fire=rng.random((n_views, config.wedges)),
         tie=rng.random(len(config.checkpoints)),
+        occluded=occluded,
     )
+    if not config.scored:
+        return draws
+    shape = (n_views, config.wedges)
+    on = rng.beta(*config.score_on, size=shape)
+    off = rng.beta(*config.score_off, size=shape)
+    return TrialDraws(**{**draws.__dict__, "on": on, "off": off})
 
 
 @njit(cache=True)
@@ -279,6 +513,183 @@ def _wedge_meets_cell(px, py, a0, a1, col, row) -> bool:
 
 
 @njit(cache=True)
+def in_view(occluded, px, py, col, row) -> bool:
+    """Whether the centre of cell (col, row) is in view from (px, py): the segment between
+    them crosses no occluder cell but, perhaps, the target's own (grid traversal, cell units).
+
+    The robot's own cell is never an occluder. A segment through a cell corner exactly (which
+    random poses never give) steps along y first.
+    """
+    n_rows, n_cols = occluded.shape
+    dx = col + 0.5 - px
+    dy = row + 0.5 - py
+    cx = int(px)  # robot positions are >= 0: truncation is the floor
+    cy = int(py)
+    step_x = 1 if dx > 0.0 else -1
+    step_y = 1 if dy > 0.0 else -1
+    # Segment parameter (0 at the robot, 1 at the centre) of the next x and y cell edges.
+    t_x = ((cx + (step_x > 0)) - px) / dx if dx != 0.0 else math.inf
+    t_y = ((cy + (step_y > 0)) - py) / dy if dy != 0.0 else math.inf
+    dt_x = abs(1.0 / dx) if dx != 0.0 else math.inf
+    dt_y = abs(1.0 / dy) if dy != 0.0 else math.inf
+    for _ in range(n_rows + n_cols + 2):  # a segment crosses at most this many cells
+        if cx == col and cy == row:
+            return True
+        if not (0 <= cx < n_cols and 0 <= cy < n_rows):
+            return True  # rounding stepped past the target: nothing blocked before it
+        if occluded[cy, cx]:
+            return False
+        if t_x < t_y:
+            cx += step_x
+            t_x += dt_x
+        else:
+            cy += step_y
+            t_y += dt_y
+    return True
+
+
+@njit(cache=True)
+def _wedge_values(
+    fov, n_wedges, object_row, object_col, xs, ys, yaws, fire_u, pfp, pfn, occluded,
+    any_occluders, on, off, scored, out,
+):  # fmt: skip
+    """out[v, w] = wedge w's value in view v: 1 or 0 as it fires (binary: with 1 - P_fn if it
+    sees the object, else P_fp), or its score on or off the object. A wedge sees the object
+    when it meets the object's cell and the cell's centre is in view."""
+    wedge = fov / n_wedges
+    for v in range(xs.shape[0]):
+        centre, lo, hi = _cell_span(xs[v], ys[v], object_col, object_row)
+        visible = True
+        if any_occluders:
+            visible = in_view(occluded, xs[v], ys[v], object_col, object_row)
+        for w in range(n_wedges):
+            a1 = yaws[v] + 0.5 * fov - w * wedge
+            a0 = a1 - wedge
+            hit = visible and _span_meets_wedge(centre, lo, hi, a0, a1)
+            if scored:
+                out[v, w] = on[v, w] if hit else off[v, w]
+            else:
+                out[v, w] = 1.0 if fire_u[v, w] < ((1.0 - pfn) if hit else pfp) else 0.0
+
+
+@njit(cache=True, inline="always")
+def _index_after(x, step, count):
+    """``_first_index_after(x, 0, step, count)`` without branches (so a loop of them runs as
+    vector instructions): the same float operations, the clipping done by min and max."""
+    t = min(max(x / step - 0.5, -1.0), count + 0.0)
+    return min(math.floor(t) + 1, count)
+
+
+@njit(cache=True, inline="always")
+def _index_at_or_after(x, step, count):
+    """``_first_index_at_or_after(x, 0, step, count)`` without branches."""
+    return math.ceil(min(max(x / step - 0.5, 0.0), count + 0.0))
+
+
+@njit(cache=True)
+def _fuse_view(state, px, py, a0, a1, weights, s, seeing, occluded, known, dys, lo, hi):
+    """Add one view's wedges to ``state``: layer q of cell (row, col) gains weights[q, w] x
+    (wedge w's coverage of the cell), for q < k = weights.shape[0]; with ``seeing`` layers
+    k + q gain the same where the cell's centre is in view (``known`` caches ``in_view`` per
+    cell for this view: -1 not yet asked).
+
+    Exactly ``add_coverage``'s arithmetic (x0 = y0 = 0, unit cells, unlimited range): every
+    sample row's run adds weight x (its points in the cell / s^2), rows in order, wedges in
+    order, so the sums are the same floats to the last bit. What differs is only the order of
+    the work: each wedge piece's run ends for all sample rows first (a division per end, in
+    loops without branches that compile to vector instructions), then the adds.
+    ``lo`` / ``hi`` are (wedges, 4, n s) scratch and ``dys`` (n s) scratch.
+    """
+    n_cols = state.shape[2] * s
+    n_samples = state.shape[1] * s
+    step = 1.0 / s
+    pieces = wedge_pieces(a0, a1)
+    split = n_samples  # the first sample row at or above the origin
+    for j in range(n_samples):
+        dys[j] = 0.0 + (j + 0.5) * step - py
+    for j in range(n_samples):
+        if dys[j] >= 0.0:
+            split = j
+            break
+    for w in range(a0.shape[0]):
+        for slot in range(4):
+            cot_start = pieces[w, slot, 0]
+            if math.isnan(cot_start):
+                continue
+            cot_end = pieces[w, slot, 1]
+            if slot < 2:  # above the origin the bearing falls with x: x in (x(b1), x(b0)]
+                for j in range(split, n_samples):
+                    lo[w, slot, j] = _index_after(px + dys[j] * cot_end, step, n_cols)
+                    hi[w, slot, j] = _index_after(px + dys[j] * cot_start, step, n_cols)
+            else:  # below it rises: x in [x(b0), x(b1))
+                for j in range(split):
+                    lo[w, slot, j] = _index_at_or_after(px + dys[j] * cot_start, step, n_cols)
+                    hi[w, slot, j] = _index_at_or_after(px + dys[j] * cot_end, step, n_cols)
+    _add_runs(state, px, a0, a1, weights, s, pieces, dys, lo, hi, -1, occluded, known, py)
+    if seeing:  # a second pass, so the blind one compiles without the visibility test
+        _add_runs(state, px, a0, a1, weights, s, pieces, dys, lo, hi, 1, occluded, known, py)
+
+
+@njit(cache=True, inline="always")
+def _add_runs(state, px, a0, a1, weights, s, pieces, dys, lo, hi, seeing, occluded, known, py):
+    """The adds of ``_fuse_view``: into layers 0..k-1 (``seeing`` < 0) or, for cells in view,
+    k..2k-1 (``seeing`` > 0; an int, so numba compiles each pass's branch away)."""
+    k = weights.shape[0]
+    n_cols = state.shape[2] * s
+    step = 1.0 / s
+    scale = 1.0 / (s * s)
+    # The wedge pieces above (0) and below (1) the origin, in add_coverage's order.
+    active = np.empty((2, 2 * a0.shape[0], 2), dtype=np.int64)
+    n_active = np.zeros(2, dtype=np.int64)
+    for w in range(a0.shape[0]):
+        for slot in range(4):
+            if not math.isnan(pieces[w, slot, 0]):
+                half = slot // 2
+                active[half, n_active[half], 0] = w
+                active[half, n_active[half], 1] = slot
+                n_active[half] += 1
+    for j in range(dys.shape[0]):
+        dy = dys[j]
+        row = j // s
+        if dy == 0.0:
+            # The row through the origin: bearing 0 to the right, pi to the left.
+            right = _first_index_after(px, 0.0, step, n_cols)
+            left = _first_index_at_or_after(px, 0.0, step, n_cols)
+            for w in range(a0.shape[0]):
+                if _contains_angle(a0[w], a1[w], 0.0):
+                    _add_run(state, row, right, n_cols, s, scale, weights, w, k, seeing,
+                             occluded, known, px, py)  # fmt: skip
+                if _contains_angle(a0[w], a1[w], math.pi):
+                    _add_run(state, row, 0, left, s, scale, weights, w, k, seeing, occluded,
+                             known, px, py)  # fmt: skip
+            continue
+        half = 0 if dy > 0.0 else 1
+        for p in range(n_active[half]):
+            w = active[half, p, 0]
+            slot = active[half, p, 1]
+            _add_run(state, row, lo[w, slot, j], hi[w, slot, j], s, scale, weights, w, k,
+                     seeing, occluded, known, px, py)  # fmt: skip
+
+
+@njit(cache=True, inline="always")
+def _add_run(state, row, i_lo, i_hi, s, scale, weights, w, k, seeing, occluded, known, px, py):
+    """Add wedge w's sample points [i_lo, i_hi) of one sample row to the cells of ``row``,
+    cell by cell (``add_coverage``'s head, full cells and tail, the same products)."""
+    if i_hi <= i_lo:
+        return
+    for col in range(i_lo // s, (i_hi - 1) // s + 1):
+        if seeing > 0:
+            if known[row, col] < 0:
+                known[row, col] = in_view(occluded, px, py, col, row)
+            if not known[row, col]:
+                continue
+        cover = (min(i_hi, s * (col + 1)) - max(i_lo, s * col)) * scale
+        base = k if seeing > 0 else 0
+        for q in range(k):
+            state[base + q, row, col] += weights[q, w] * cover
+
+
+@njit(cache=True)
 def _argmax_hits(values, tie_u, object_row, object_col) -> bool:
     """Whether the maximal cell (random among near-ties) is the object's cell or a neighbour."""
     top = values.max()
@@ -308,32 +719,35 @@ def _score(confidence, tie_u, object_rows, object_cols, out) -> None:
 
 
 @njit(cache=True)
-def _run_trial(
-    n, supersample, fov, n_wedges, object_row, object_col, xs, ys, yaws, fire_u, checkpoints,
-    pfp, pfn, layer_weights, out,
-):  # fmt: skip
+def _run_trial(n, supersample, fov, xs, ys, yaws, weights, occluded, seeing, checkpoints, out):
     """Fuse one trial's views; out[k, c] gets layer k at checkpoint c.
 
-    Layers are one evidence sum per row of ``layer_weights`` ((silent, fired) weights), then the
-    observed sum (weight 1), all (n, n) over cells.
+    ``weights`` (L, V, W) is each evidence layer's weight of wedge w in view v. Layers are the
+    L evidence sums then the observed sum (weight 1), all (n, n) over cells; with ``seeing``
+    the same L + 1 again, updated only where a cell's centre is in view (``in_view``).
     """
-    n_layers = layer_weights.shape[0]
-    state = np.zeros((n_layers + 1, n, n))
+    n_evidence, _, n_wedges = weights.shape
+    per_set = n_evidence + 1
+    state = np.zeros((2 * per_set if seeing else per_set, n, n))
+    view_weights = np.ones((per_set, n_wedges))  # the last row: observed
+    known = np.empty((n, n), dtype=np.int8)
+    dys = np.empty(n * supersample)
+    lo = np.empty((n_wedges, 4, n * supersample), dtype=np.int64)
+    hi = np.empty((n_wedges, 4, n * supersample), dtype=np.int64)
     a0 = np.empty(n_wedges)
     a1 = np.empty(n_wedges)
-    weights = np.ones((n_layers + 1, n_wedges))
     wedge = fov / n_wedges
     c = 0
     for v in range(xs.shape[0]):
-        centre, lo, hi = _cell_span(xs[v], ys[v], object_col, object_row)
         for w in range(n_wedges):
             a1[w] = yaws[v] + 0.5 * fov - w * wedge
             a0[w] = a1[w] - wedge
-            hit = _span_meets_wedge(centre, lo, hi, a0[w], a1[w])
-            fired = 1 if fire_u[v, w] < ((1.0 - pfn) if hit else pfp) else 0
-            for k in range(n_layers):
-                weights[k, w] = layer_weights[k, fired]
-        add_coverage(state, xs[v], ys[v], a0, a1, weights, 0.0, 0.0, 1.0, supersample, 0.0)
+            for q in range(n_evidence):
+                view_weights[q, w] = weights[q, v, w]
+        if seeing:
+            known[:] = -1
+        _fuse_view(state, xs[v], ys[v], a0, a1, view_weights, supersample, seeing, occluded,
+                   known, dys, lo, hi)  # fmt: skip
         if v + 1 == checkpoints[c]:
             out[:, c] = state
             c += 1
@@ -353,65 +767,72 @@ def _run_batch(
     pfn: float,
     trials: range,
     rules: Sequence[FusionRule],
-    layer_weights: np.ndarray,
-    layer_of: Sequence[int],
 ) -> np.ndarray:
-    """Successes (len(rules), len(trials), len(checkpoints)) of some trials, as booleans."""
+    """Successes (len(evaluations), len(trials), len(checkpoints)) of some trials, as bools."""
     n, checkpoints = config.grid, np.asarray(config.checkpoints, dtype=np.int64)
-    n_layers = len(layer_weights)
+    n_views = checkpoints[-1]
+    draws = [draw_trial(config, sweep_trial_rng(config, pfp, pfn, t)) for t in trials]
+    values = np.empty((len(trials), n_views, config.wedges))
+    for t, d in enumerate(draws):
+        _wedge_values(
+            config.fov, config.wedges, d.object_row, d.object_col, d.x, d.y, d.yaw, d.fire,
+            pfp, pfn, d.occluded, config.occluder_count > 0, d.on, d.off, config.scored,
+            values[t],
+        )  # fmt: skip
+    # Layers by the weights of this batch's values: continuous scores share a layer only
+    # between rules that weigh every drawn value alike.
+    weights, layer_of = evidence_layers(rules, values)
+    weights = np.ascontiguousarray(np.moveaxis(weights, 0, 1))  # (trials, layers, V, W)
+    seeing = config.occluder_count > 0
+    per_set = weights.shape[1] + 1  # the evidence layers, then observed
+    n_vis = len(config.visibilities)
     # Layer first, so each rule reads contiguous (trials, checkpoints, n, n) blocks.
-    layers = np.zeros((n_layers + 1, len(trials), len(checkpoints), n, n))
-    ties = np.empty((len(trials), len(checkpoints)))
-    object_rows = np.empty(len(trials), dtype=np.int64)
-    object_cols = np.empty(len(trials), dtype=np.int64)
-    for t, trial in enumerate(trials):
-        draws = draw_trial(config, trial_rng(config.seed, pfp, pfn, trial))
-        ties[t], object_rows[t], object_cols[t] = draws.tie, draws.object_row, draws.object_col
+    layers = np.zeros((n_vis * per_set, len(trials), len(checkpoints), n, n))
+    for t, d in enumerate(draws):
         _run_trial(
-            n, config.supersample, config.fov, config.wedges, draws.object_row, draws.object_col,
-            draws.x, draws.y, draws.yaw, draws.fire, checkpoints, pfp, pfn, layer_weights,
-            layers[:, t],
+            n, config.supersample, config.fov, d.x, d.y, d.yaw, weights[t], d.occluded, seeing,
+            checkpoints, layers[:, t],
         )  # fmt: skip
     layers.flags.writeable = False  # shared by the rules' reads: none may change it
-    observed = layers[-1]
-    hits = np.empty((len(rules), len(trials), len(checkpoints)), dtype=np.bool_)
+    ties = np.array([d.tie for d in draws])
+    object_rows = np.array([d.object_row for d in draws], dtype=np.int64)
+    object_cols = np.array([d.object_col for d in draws], dtype=np.int64)
+    hits = np.empty((len(rules) * n_vis, len(trials), len(checkpoints)), dtype=np.bool_)
     for r, rule in enumerate(rules):
-        confidence = np.asarray(rule.read(layers[layer_of[r]], observed), dtype=float)
-        if confidence.shape != observed.shape:
-            raise TwinError(
-                f"fusion rule {rule.name!r}: read gave shape {confidence.shape} for layers of "
-                f"shape {observed.shape}; it must be element-wise"
-            )
-        _score(np.ascontiguousarray(confidence), ties, object_rows, object_cols, hits[r])
+        for k in range(n_vis):  # blind, then (with occluders) the cells in view only
+            observed = layers[k * per_set + per_set - 1]
+            evidence = layers[k * per_set + layer_of[r]]
+            confidence = np.asarray(rule.read(evidence, observed), dtype=float)
+            if confidence.shape != observed.shape:
+                raise TwinError(
+                    f"fusion rule {rule.name!r}: read gave shape {confidence.shape} for layers "
+                    f"of shape {observed.shape}; it must be element-wise"
+                )
+            _score(np.ascontiguousarray(confidence), ties, object_rows, object_cols,
+                   hits[r * n_vis + k])  # fmt: skip
     return hits
 
 
 def run_trial(config: SweepConfig, pfp: float, pfn: float, trial: int) -> np.ndarray:
-    """Successes (len(config.fusion), len(checkpoints)) of one trial, as booleans."""
+    """Successes (len(config.evaluations), len(checkpoints)) of one trial, as booleans."""
     rules = sweep_rules(config, pfp, pfn)
-    layer_weights, layer_of = evidence_layers(rules)
-    batch = _run_batch(config, pfp, pfn, range(trial, trial + 1), rules, layer_weights, layer_of)
-    return batch[:, 0]
+    return _run_batch(config, pfp, pfn, range(trial, trial + 1), rules)[:, 0]
 
 
 def run_trials(config: SweepConfig, pfp: float, pfn: float, start: int, stop: int) -> np.ndarray:
-    """Summed successes (len(config.fusion), len(checkpoints)) of trials start..stop-1."""
+    """Summed successes (len(config.evaluations), len(checkpoints)) of trials start..stop-1."""
     rules = sweep_rules(config, pfp, pfn)
-    layer_weights, layer_of = evidence_layers(rules)
-    successes = np.zeros((len(rules), len(config.checkpoints)), dtype=np.int64)
-    size = _batch_size(config, len(layer_weights))
+    successes = np.zeros((len(config.evaluations), len(config.checkpoints)), dtype=np.int64)
+    size = _batch_size(config, len(config.visibilities) * (len(rules) + 1))
     for first in range(start, stop, size):
         trials = range(first, min(first + size, stop))
-        hits = _run_batch(config, pfp, pfn, trials, rules, layer_weights, layer_of)
-        successes += hits.sum(axis=1)
+        successes += _run_batch(config, pfp, pfn, trials, rules).sum(axis=1)
     return successes
 
 
 def run_setting(config: SweepConfig, setting: tuple[float, float]) -> SettingResult:
     """All trials of one (P_fp, P_fn) setting."""
-    pfp, pfn = setting
-    successes = run_trials(config, pfp, pfn, 0, config.trials)
-    return SettingResult(pfp, pfn, config.trials, config.checkpoints, config.fusion, successes)
+    return config.result(setting, run_trials(config, *setting, 0, config.trials))
 
 
 @dataclass(frozen=True)
@@ -433,7 +854,7 @@ class ChunkResult:
     """Summed successes of one chunk's trials; chunks of a setting add up to its result."""
 
     chunk: Chunk
-    successes: np.ndarray = field(repr=False)  # (len(fusion), len(checkpoints)) ints
+    successes: np.ndarray = field(repr=False)  # (len(evaluations), len(checkpoints)) ints
 
 
 def run_chunk(config: SweepConfig, chunk: Chunk) -> ChunkResult:
@@ -478,10 +899,14 @@ def plan_chunks(
 
 
 def result_rows(config: SweepConfig, results: Sequence[SettingResult]) -> list[dict[str, object]]:
-    """Rows of ``results.csv`` in a stable order: rule, P_fp, P_fn, views."""
+    """Rows of ``results.csv`` in a stable order: rule, visibility, P_fp, P_fn, views."""
     rows = [row for result in results for row in result.rows()]
     order = {rule: i for i, rule in enumerate(config.fusion)}
-    return sorted(rows, key=lambda r: (order[r["fusion"]], r["pfp"], r["pfn"], r["views"]))
+    seen = {v: i for i, v in enumerate(VISIBILITIES)}
+    return sorted(
+        rows,
+        key=lambda r: (order[r["fusion"]], seen[r["visibility"]], r["pfp"], r["pfn"], r["views"]),
+    )
 
 
 # -- running a sweep, resumably ----------------------------------------------------------------
@@ -491,7 +916,7 @@ JOURNAL_NAME = "settings.jsonl"
 
 def _identity(config: SweepConfig) -> dict[str, object]:
     """The parameters that decide a setting's result, and the rules its rows of successes are."""
-    return {
+    identity: dict[str, object] = {
         "fusion": list(config.fusion),
         "trials": config.trials,
         "wedges": config.wedges,
@@ -502,6 +927,15 @@ def _identity(config: SweepConfig) -> dict[str, object]:
         "min_observed": config.min_observed,
         "checkpoints": list(config.checkpoints),
     }
+    # Only what departs from the paper's world, so a paper's sweep keeps its journal's identity.
+    if config.occluders > 0.0:
+        identity["occluders"] = config.occluders
+    if config.scored:
+        identity.update(
+            scores=config.scores, score_on=list(config.score_on),
+            score_off=list(config.score_off), thresholds=list(config.thresholds),
+        )  # fmt: skip
+    return identity
 
 
 def _refuse_journal_without_rules(path: Path) -> None:
@@ -544,7 +978,7 @@ class SweepJournal:
         if not fresh:
             _refuse_journal_without_rules(path)
         self._journal = JsonLinesJournal(path, "sweep", _identity(config), fresh)
-        shape = (len(config.fusion), len(config.checkpoints))
+        shape = (len(config.evaluations), len(config.checkpoints))
         for entry in self._journal.entries:
             try:
                 start, stop = entry.get("trials", (0, config.trials))
@@ -572,8 +1006,7 @@ class SweepJournal:
             return None
         total = np.sum([c.successes for c in chunks], axis=0, dtype=np.int64)
         del self.partial[setting]
-        config = self.config
-        done = SettingResult(*setting, config.trials, config.checkpoints, config.fusion, total)
+        done = self.config.result(setting, total)
         self.done[setting] = done
         return done
 
@@ -623,10 +1056,13 @@ def run_sweep(
     return [journal.done[s] for s in config.settings()]
 
 
-def write_results_csv(path: Path, rows: Sequence[dict[str, object]]) -> Path:
-    """``results.csv`` with exactly ``RESULT_COLUMNS``, written atomically."""
+def write_results_csv(
+    path: Path, rows: Sequence[dict[str, object]], columns: Sequence[str] = RESULT_COLUMNS
+) -> Path:
+    """``results.csv`` with exactly ``columns`` (``SweepConfig.result_columns``: by default
+    the paper's), written atomically."""
     buffer = io.StringIO()
-    writer = csv.DictWriter(buffer, fieldnames=RESULT_COLUMNS, lineterminator="\n")
+    writer = csv.DictWriter(buffer, fieldnames=columns, lineterminator="\n", extrasaction="ignore")
     writer.writeheader()
     writer.writerows(rows)
     return write_text_atomic(path, buffer.getvalue())

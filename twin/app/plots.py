@@ -289,6 +289,47 @@ def figure3_3d(
     return None if fig is None else save_figure(fig, path, tight=False)
 
 
+def draw_threshold_figure(
+    rows: Sequence[dict[str, object]], fusion: Sequence[str], views: Sequence[int]
+) -> Figure:
+    """Monte Carlo with continuous scores: success (%) over the detector threshold, a panel per
+    view count and a line per rule (``fusion`` names the rows' ``fusion`` values). Only
+    ``logodds`` uses the threshold; the other rules' lines are flat, the same worlds scored
+    again, so they are the reference it is read against."""
+    plt = _pyplot()
+    table = {(r["fusion"], r["threshold"], r["views"]): r["success_rate"] for r in rows}
+    thresholds = sorted({float(r["threshold"]) for r in rows})
+    # A rule keeps its colour with and without visibility ("RULE+visibility": solid; blind:
+    # dashed when the other is drawn too), so the pair reads as one rule.
+    bases = list(dict.fromkeys(rule.split("+")[0] for rule in fusion))
+    cycle = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+    paired = any("+" in rule for rule in fusion)
+    fig, axes = plt.subplots(1, len(views), figsize=(3.4 * len(views) + 1.6, 3.2),
+                             squeeze=False, layout="constrained")  # fmt: skip
+    for ax, count in zip(axes[0], views, strict=True):
+        for rule in fusion:
+            curve = [100.0 * table[(rule, t, count)] for t in thresholds]
+            colour = cycle[bases.index(rule.split("+")[0]) % len(cycle)]
+            style = "--" if paired and "+" not in rule else "-"
+            ax.plot(thresholds, curve, style, color=colour, marker="o", ms=3, label=rule)
+        ax.set_ylim(0, 100)
+        ax.set_xlabel("threshold (logodds fires at score >= it)", fontsize=8)
+        ax.set_title(f"{count} views", fontsize=9)
+        ax.grid(alpha=0.3)
+        ax.tick_params(labelsize=7)
+    axes[0, 0].set_ylabel("localization success (%)", fontsize=8)
+    fig.legend(*axes[0, 0].get_legend_handles_labels(), loc="outside right center", fontsize=7)
+    fig.suptitle(f"Localization success with continuous scores ({_trials_note(rows)})")
+    return fig
+
+
+def threshold_figure(
+    path: Path, rows: Sequence[dict[str, object]], fusion: Sequence[str], views: Sequence[int]
+) -> Path:
+    """Write ``draw_threshold_figure`` as PNG."""
+    return save_figure(draw_threshold_figure(rows, fusion, views), path, tight=False)
+
+
 def grid_figure(
     path: Path,
     layer: np.ndarray,

@@ -7,7 +7,7 @@ import math
 import sys
 from pathlib import Path
 
-from twin.commands._args import comma_list
+from twin.commands._args import comma_list, numbers
 
 DEFAULT_OUT = Path("runs/montecarlo")
 
@@ -36,14 +36,15 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="reproduce the paper's Monte Carlo evaluation (Figure 3)",
         description="Monte Carlo over detector false-positive (P_fp) and false-negative (P_fn) "
         "rates in the paper's abstract world; writes DIR/results.csv, DIR/figure3.png (heat "
-        "maps with the numbers) and DIR/figure3_3d.png (the paper's surfaces). "
+        "maps with the numbers) and DIR/figure3_3d.png (the paper's surfaces); with --scores "
+        "beta DIR/thresholds.png (success over the threshold) instead. "
         "Finished chunks of trials are journaled in DIR/settings.jsonl as they arrive: a sweep "
         "interrupted in DIR continues where it stopped when run again.",
     )
     rates = comma_list(float, "rates in [0, 1]")
-    tenths = ",".join(f"{0.1 * i:.1f}" for i in range(11))
-    parser.add_argument("--pfp", type=rates, default=rates(tenths), help="P_fp list (0..1)")
-    parser.add_argument("--pfn", type=rates, default=rates(tenths), help="P_fn list (0..1)")
+    # None: not given (the tenths 0..1), so --scores beta can refuse rates it would not use.
+    parser.add_argument("--pfp", type=rates, default=None, help="P_fp list (0..1; 0,0.1,..,1)")
+    parser.add_argument("--pfn", type=rates, default=None, help="P_fn list (0..1; 0,0.1,..,1)")
     parser.add_argument(
         "--views", type=comma_list(int, "view counts"), default=(10, 25, 75, 150),
         help="view counts at which each trial is scored (default 10,25,75,150)",
@@ -62,6 +63,29 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument(
         "--min-observed", type=float, default=1.0,
         help="normalized rule: cells seen less than this (in full-cell views) read 0 (1.0)",
+    )  # fmt: skip
+    parser.add_argument(
+        "--occluders", type=float, default=0.0,
+        help="fraction of the cells that block the view, placed at random per trial (0: the "
+        "paper's open world); each rule is then scored blind and knowing what was in view",
+    )  # fmt: skip
+    parser.add_argument(
+        "--scores", choices=("binary", "beta"), default="binary",
+        help="binary: wedges fire or not (the paper; settings --pfp x --pfn); beta: continuous "
+        "wedge scores from --score-on/--score-off, settings --threshold",
+    )  # fmt: skip
+    parser.add_argument(
+        "--score-on", type=numbers(2, "Beta shape parameters A,B"), default=(4.0, 8.0),
+        help="--scores beta: Beta(A,B) of a wedge's score when it sees the object (4,8)",
+    )  # fmt: skip
+    parser.add_argument(
+        "--score-off", type=numbers(2, "Beta shape parameters A,B"), default=(2.0, 20.0),
+        help="--scores beta: Beta(A,B) of a wedge's score elsewhere (2,20)",
+    )  # fmt: skip
+    parser.add_argument(
+        "--threshold", type=comma_list(float, "thresholds in (0, 1)"), default=(0.16,),
+        help="--scores beta: logodds fires at score >= threshold, with the rates it has under "
+        "the two distributions; one setting per threshold (0.16)",
     )  # fmt: skip
     parser.add_argument("--seed", type=int, default=0, help="random seed (0)")
     add_executor_arguments(parser)
@@ -90,13 +114,21 @@ def run(args: argparse.Namespace) -> int:
         write_results_csv,
     )
     from twin.app.outputs import check_output_folder, make_output_folder
-    from twin.app.plots import figure3, figure3_3d
+    from twin.app.plots import figure3, figure3_3d, threshold_figure
     from twin.core.errors import InputError
 
+    if args.scores == "beta" and (args.pfp is not None or args.pfn is not None):
+        raise InputError(
+            "--pfp/--pfn set a binary detector's rates; with --scores beta the rates follow "
+            "from --threshold, so leave them out"
+        )
+    tenths = tuple(round(0.1 * i, 1) for i in range(11))
     config = SweepConfig(
-        pfp=args.pfp, pfn=args.pfn, views=args.views, trials=args.trials, wedges=args.wedges,
-        fov=math.radians(args.fov_deg), grid=args.grid, supersample=args.supersample,
-        fusion=args.fusion, seed=args.seed, min_observed=args.min_observed,
+        pfp=args.pfp or tenths, pfn=args.pfn or tenths, views=args.views, trials=args.trials,
+        wedges=args.wedges, fov=math.radians(args.fov_deg), grid=args.grid,
+        supersample=args.supersample, fusion=args.fusion, seed=args.seed,
+        min_observed=args.min_observed, occluders=args.occluders, scores=args.scores,
+        score_on=args.score_on, score_off=args.score_off, thresholds=args.threshold,
     )  # fmt: skip
     chunk = args.chunk if args.chunk is not None else DEFAULT_CHUNK_TRIALS
     if chunk < 1:
@@ -127,7 +159,9 @@ def run(args: argparse.Namespace) -> int:
     except KeyboardInterrupt:
         # The settings that finished are results: write them; the journal keeps the rest.
         finished = [journal.done[s] for s in config.settings() if s in journal.done]
-        path = write_results_csv(args.out / "results.csv", result_rows(config, finished))
+        path = write_results_csv(
+            args.out / "results.csv", result_rows(config, finished), config.result_columns
+        )
         if not args.quiet:
             print(
                 f"stopped with {len(finished)} of {total} settings done; wrote {path}; run the "
@@ -137,16 +171,31 @@ def run(args: argparse.Namespace) -> int:
     finally:
         executor.close()
     rows = result_rows(config, results)
-    csv_path = write_results_csv(args.out / "results.csv", rows)
-    drawn = (rows, config.fusion, config.pfp, config.pfn, config.checkpoints)
-    written = [csv_path, figure3(args.out / "figure3.png", *drawn)]
-    surfaces = figure3_3d(args.out / "figure3_3d.png", *drawn)  # None: a single rate varies
-    if surfaces is not None:
-        written.append(surfaces)
+    csv_path = write_results_csv(args.out / "results.csv", rows, config.result_columns)
+    # The figures draw one panel row per (rule, visibility), named as the table names them.
+    named = [{**row, "fusion": label(row["fusion"], row["visibility"])} for row in rows]
+    labels = [label(rule, visibility) for rule, visibility in config.evaluations]
+    written = [csv_path]
+    if config.scored:
+        written.append(
+            threshold_figure(args.out / "thresholds.png", named, labels, config.checkpoints)
+        )
+    else:
+        drawn = (named, labels, config.pfp, config.pfn, config.checkpoints)
+        written.append(figure3(args.out / "figure3.png", *drawn))
+        surfaces = figure3_3d(args.out / "figure3_3d.png", *drawn)  # None: one rate varies
+        if surfaces is not None:
+            written.append(surfaces)
     if not args.quiet:
         print(summary_table(rows, config))
         print(f"wrote {', '.join(str(p) for p in written)}")
     return 0
+
+
+def label(rule: str, visibility: str) -> str:
+    """A (rule, visibility) pair's name in tables and figures: the rule, marked when it knew
+    which cells were in view."""
+    return rule if visibility == "none" else f"{rule}+visibility"
 
 
 def summary_table(rows: list[dict[str, object]], config) -> str:
@@ -154,18 +203,35 @@ def summary_table(rows: list[dict[str, object]], config) -> str:
 
     The corners pair the lowest rate of each axis with the rate nearest 0.5: the paper's
     statements are about exactly these (noise-free; many false negatives; many false positives).
+    With scores the columns are the thresholds instead (each with its rates).
     """
-    table = {(r["fusion"], r["pfp"], r["pfn"], r["views"]): r["success_rate"] for r in rows}
-    fp_axis = (min(config.pfp), min(config.pfp, key=lambda p: abs(p - 0.5)))
-    fn_axis = (min(config.pfn), min(config.pfn, key=lambda p: abs(p - 0.5)))
-    corners = list(dict.fromkeys((fp, fn) for fp in fp_axis for fn in fn_axis))
-    head = ["rule", "views"] + [f"fp={fp:g} fn={fn:g}" for fp, fn in corners] + ["mean(all)"]
+    table = {
+        (r["fusion"], r["visibility"], r["pfp"], r["pfn"], r["views"]): r["success_rate"]
+        for r in rows
+    }
+    if config.scored:
+        corners = config.settings()
+        names = [
+            f"t={t:g} (fp={fp:.2f} fn={fn:.2f})"
+            for t, (fp, fn) in zip(config.thresholds, corners, strict=True)
+        ]
+    else:
+        fp_axis = (min(config.pfp), min(config.pfp, key=lambda p: abs(p - 0.5)))
+        fn_axis = (min(config.pfn), min(config.pfn, key=lambda p: abs(p - 0.5)))
+        corners = list(dict.fromkeys((fp, fn) for fp in fp_axis for fn in fn_axis))
+        names = [f"fp={fp:g} fn={fn:g}" for fp, fn in corners]
+    head = ["rule", "views", *names, "mean(all)"]
     lines = [head]
-    for rule in config.fusion:
+    for rule, visibility in config.evaluations:
         for views in config.checkpoints:
-            rates = [r["success_rate"] for r in rows if r["fusion"] == rule and r["views"] == views]
-            cells = [f"{100 * table[(rule, fp, fn, views)]:.0f}%" for fp, fn in corners]
-            lines.append([rule, str(views), *cells, f"{100 * sum(rates) / len(rates):.0f}%"])
+            rates = [
+                r["success_rate"]
+                for r in rows
+                if (r["fusion"], r["visibility"], r["views"]) == (rule, visibility, views)
+            ]
+            cells = [f"{100 * table[(rule, visibility, *c, views)]:.0f}%" for c in corners]
+            mean = f"{100 * sum(rates) / len(rates):.0f}%"
+            lines.append([label(rule, visibility), str(views), *cells, mean])
     widths = [max(len(line[i]) for line in lines) for i in range(len(head))]
     return "\n".join(
         "  ".join(c.rjust(w) for c, w in zip(line, widths, strict=True)) for line in lines
