@@ -3,7 +3,10 @@
     python benchmarks/fusion_generality.py --seeds 5000-5023 --out runs/generality
     python benchmarks/fusion_generality.py --seeds 5000-5023 --out runs/generality-4 \\
         --set mission.views_per_stop=4 --set mission.view_step_deg=90
-    python benchmarks/fusion_generality.py --seeds 1000-1023 --out runs/dev --fit-temperature
+    python benchmarks/fusion_generality.py --seeds 1000-1023 --out runs/dev4 \
+        --set mission.views_per_stop=4 --set mission.view_step_deg=90
+    python benchmarks/fusion_generality.py --seeds 1000-1023 --out runs/dev \
+        --fit-temperature runs/dev4
 
 Each seed puts the target on a random furniture top (``twin survey --place-target random``)
 and flies the configured mission once (two at a time); a finished run folder is reused, so an
@@ -12,14 +15,14 @@ again with each rule, with and without the visibility model and the direction bi
 rules are compared on identical frames: the only difference is the rule. Prints per variant
 the success within 0.3 and 0.2 m and the median error; the reliability table of the
 ``confidence`` (the calibrated belief's probability that the target lies within 0.2 m of the
-estimate); and with ``--fit-temperature`` the temperature that makes the confidence honest
-on these runs (fit it on development seeds, report on others).
+estimate), at the end of each run and after every stop; and with ``--fit-temperature`` the
+temperature that makes the confidence honest on these runs and those of other benchmarks
+(fit it on development seeds, report on others).
 """
 
 from __future__ import annotations
 
 import argparse
-import itertools
 import json
 import math
 import statistics
@@ -30,6 +33,7 @@ import numpy as np
 
 DEFAULT_CONFIG = "living_room_survey"
 RADIUS = 0.2
+RELIABILITY_BINS = [0.0, 0.2, 0.4, 0.6, 0.8, 0.9, 0.95, 1.0]
 
 
 def seeds_from(text: str) -> list[int]:
@@ -59,16 +63,19 @@ def fly(args: tuple[int, Path, str, tuple[str, ...]]) -> Path:
     return folder
 
 
-def variants(config, detector) -> dict[str, dict]:
+def variants(detector) -> dict[str, dict]:
     """Name -> how to fuse: the rule, visibility on/off, direction bins."""
     from twin.core.fusion import make_rule
 
-    calibrated = {m.name: m.calibration.rule() for m in detector.models}
+    calibrations = {m.name: m.calibration for m in detector.models}
     rules = {
         "accumulate": make_rule("accumulate"),
         "normalized": make_rule("normalized"),
         "logodds": make_rule("logodds", p_fp=0.10, p_fn=0.05, threshold=0.162),
-        "calibrated": calibrated,
+        "calibrated": {name: c.rule() for name, c in calibrations.items()},
+        "calibrated by distance": {
+            name: c.rule(by_distance=True) for name, c in calibrations.items()
+        },
     }
     out = {}
     for name, rule in rules.items():
@@ -81,7 +88,7 @@ def variants(config, detector) -> dict[str, dict]:
 
 def estimate(grid, name: str, separation: float) -> tuple[float, float]:
     best = grid.peaks(name, k=1, min_separation=separation).best
-    return best.x, best.y
+    return float(best.x), float(best.y)
 
 
 def main() -> None:
@@ -91,14 +98,29 @@ def main() -> None:
     parser.add_argument("--config", default=DEFAULT_CONFIG)
     parser.add_argument("--set", action="append", default=[], help="KEY=VALUE for the survey")
     parser.add_argument("--workers", type=int, default=2)
-    parser.add_argument("--fit-temperature", action="store_true")
+    parser.add_argument(
+        "--fit-temperature", nargs="*", type=Path, metavar="DIR",
+        help="fit the confidence's temperature on these runs and the --out folders of others",
+    )  # fmt: skip
     parser.add_argument("--temperature", type=float, help="confidence temperature (config's)")
+    parser.add_argument(
+        "--default",
+        default="calibrated +vis +dir8",
+        help="the variant whose estimate the confidence is about (the shipped config's rule)",
+    )
+    parser.add_argument("--belief", default="calibrated +vis +dir8", help="the variant that is the "
+                        "belief the confidence is read from")  # fmt: skip
     args = parser.parse_args()
 
     from twin.app.config import load_config, resolve_config
     from twin.app.detection import prepare_detector
     from twin.app.view_log import ViewLog
-    from twin.core.confidence import confidence_within, fit_temperature, posterior
+    from twin.core.confidence import (
+        confidence_within,
+        fit_temperature,
+        posterior,
+        reliability_table,
+    )
     from twin.core.grid import AccumulatorGrid
 
     seeds = seeds_from(args.seeds)
@@ -114,52 +136,91 @@ def main() -> None:
     name = config.objects[0].name
     spec, sep = config.grid.spec, config.grid.peak_separation
     temperature = args.temperature or config.confidence.temperature
-    table = variants(config, detector)
+    table = variants(detector)
     errors: dict[str, list[float]] = {label: [] for label in table}
-    beliefs, truths, confidences, hits = [], [], [], []
+    finals: list[tuple] = []  # (belief layer, truth, estimate, confidence, hit) per run
+    checkpoints: list[tuple] = []  # the same after every stop of every run
     for seed, folder in zip(seeds, folders, strict=True):
         log = ViewLog.load(folder / "views.npz")
         result = json.loads((folder / "result.json").read_text())
         truth = result["objects"][name]["truth_m"]
-        row = []
+        row, estimates = [], {}
         for label, how in table.items():
             grid = AccumulatorGrid(
                 [name], spec, how["rule"], config.grid.supersample, direction_bins=how["bins"]
             )
             log.fuse_into(grid, visibility=how["visibility"])
             x, y = estimate(grid, name, sep)
+            estimates[label] = (x, y)
             errors[label].append(math.hypot(x - truth[0], y - truth[1]))
             row.append(f"{errors[label][-1]:.2f}")
-        belief = AccumulatorGrid([name], spec, table["calibrated +vis"]["rule"],
-                                 config.grid.supersample)  # fmt: skip
-        log.fuse_into(belief, visibility=True)
-        beliefs.append(belief.layer(name))
-        truths.append(truth)
-        default = result["objects"][name]
-        cells, _ = posterior(beliefs[-1], temperature, config.confidence.p_absent)
-        est = default["estimate_m"]
-        confidences.append(float(confidence_within(cells, spec, tuple(est), RADIUS)))
-        hits.append(math.hypot(est[0] - truth[0], est[1] - truth[1]) <= RADIUS)
+        # The confidence after every stop (checkpoints of the mission), and at its end.
+        default, belief = (
+            AccumulatorGrid([name], spec, table[label]["rule"], config.grid.supersample,
+                            direction_bins=table[label]["bins"])
+            for label in (args.default, args.belief)
+        )  # fmt: skip
+        per_stop = max(1, len(log) // len(config.mission.stops))
+        for first in range(0, len(log), per_stop):
+            part = ViewLog(log.objects, log.max_range)
+            part.views = log.views[first : first + per_stop]
+            part.fuse_into(default, visibility=table[args.default]["visibility"])
+            part.fuse_into(belief, visibility=table[args.belief]["visibility"])
+            est = estimate(default, name, sep)
+            layer = belief.layer(name)
+            cells, _ = posterior(layer, temperature, config.confidence.p_absent)
+            final = first + per_stop >= len(log)
+            samples = [(layer, truth, est,
+                        float(confidence_within(cells, spec, est, RADIUS)),
+                        math.hypot(est[0] - truth[0], est[1] - truth[1]) <= RADIUS)]  # fmt: skip
+            checkpoints += samples
+            if final:
+                finals += samples
         print(f"seed {seed}: truth {truth} errors " + " ".join(row), flush=True)
 
     print(f"\n{len(seeds)} placements, seeds {args.seeds}, config {args.config} {args.set}")
-    print(f"{'variant':32s} {'<= 0.3 m':>9s} {'<= 0.2 m':>9s} {'median':>8s}")
+    print(f"{'variant':32s} {'<= 0.3 m':>9s} {'<= 0.2 m':>9s} {'median':>8s}  missed (> 0.2 m)")
     for label, errs in errors.items():
         e = np.array(errs)
+        missed = " ".join(str(seed) for seed, err in zip(seeds, errs, strict=True) if err > 0.2)
         print(f"{label:32s} {100 * np.mean(e <= 0.3):8.0f}% {100 * np.mean(e <= 0.2):8.0f}% "
-              f"{statistics.median(errs):7.2f} m")  # fmt: skip
-    print(f"\nconfidence (temperature {temperature:g}) against 'the estimate is within 0.2 m':")
-    bins = [0.0, 0.5, 0.7, 0.8, 0.9, 0.95, 1.0001]
-    c, h = np.array(confidences), np.array(hits)
-    print(f"{'confidence':>14s} {'runs':>5s} {'mean conf':>10s} {'right':>7s}")
-    for lo, hi in itertools.pairwise(bins):
-        inside = (c >= lo) & (c < hi)
-        if inside.any():
-            print(f"  [{lo:.2f}, {min(hi, 1):.2f}) {inside.sum():5d} {c[inside].mean():10.3f} "
-                  f"{h[inside].mean():7.2f}")  # fmt: skip
-    if args.fit_temperature:
-        fitted = fit_temperature(beliefs, truths, spec, RADIUS)
-        print(f"\nfitted temperature: {fitted:g}")
+              f"{statistics.median(errs):7.2f} m  {missed}")  # fmt: skip
+    print(f"\nconfidence of the {args.default!r} estimate from the {args.belief!r} belief "
+          f"(temperature {temperature:g}, p_absent {config.confidence.p_absent:g}) against "
+          "'the estimate is within 0.2 m':")  # fmt: skip
+    for label, samples in (("at the end of each run", finals),
+                           ("after every stop of every run", checkpoints)):  # fmt: skip
+        c = np.array([sample[3] for sample in samples])
+        h = np.array([sample[4] for sample in samples])
+        print(f"{label}: {len(c)} estimates, {h.mean():.0%} right, mean confidence {c.mean():.2f}")
+        print(f"{'confidence':>14s} {'n':>5s} {'mean conf':>10s} {'right':>7s}")
+        for row in reliability_table(c, h, RELIABILITY_BINS):
+            if row.n:
+                print(f"  [{row.lo:.2f}, {min(row.hi, 1):.2f}) {row.n:5d} "
+                      f"{row.mean_confidence:10.3f} {row.hit_rate:7.2f}")  # fmt: skip
+        np.savez(args.out / f"confidence-{'final' if samples is finals else 'stops'}.npz",
+                 confidence=c, hit=h)  # fmt: skip
+    # Every stop's belief, truth and estimate, so a temperature can be fitted on several
+    # benchmarks' runs together (--fit-temperature DIR ...).
+    np.savez_compressed(
+        args.out / "beliefs.npz",
+        layers=np.array([sample[0] for sample in checkpoints]),
+        truths=np.array([sample[1] for sample in checkpoints]),
+        estimates=np.array([sample[2] for sample in checkpoints]),
+    )
+    if args.fit_temperature is not None:
+        folders = [args.out, *args.fit_temperature]
+        saved = [np.load(folder / "beliefs.npz") for folder in folders]
+        fitted = fit_temperature(
+            [layer for data in saved for layer in data["layers"]],
+            [tuple(truth) for data in saved for truth in data["truths"]],
+            spec,
+            RADIUS,
+            p_absent=config.confidence.p_absent,
+            estimates=[tuple(e) for data in saved for e in data["estimates"]],
+        )
+        runs = ", ".join(str(folder) for folder in folders)
+        print(f"\nfitted temperature (every stop of the runs in {runs}): {fitted.temperature:g}")
 
 
 if __name__ == "__main__":

@@ -285,7 +285,8 @@ def test_a_calibration_keeps_one_table_per_distance_band() -> None:
     assert cal.range_on_counts[0] != cal.range_on_counts[1]
     again = ScoreCalibration.from_json(json.loads(json.dumps(cal.to_json())))
     np.testing.assert_array_equal(again.range_tables(), tables)
-    rule = cal.rule()
+    assert cal.rule().ranges == () and not cal.rule().range_llr  # pooled unless asked
+    rule = cal.rule(by_distance=True)
     assert rule.ranges == (2.0,) and len(rule.range_llr) == 2
     assert "LLR by the object's distance" in cal.table_text()
 
@@ -324,5 +325,8 @@ def test_the_grid_fuses_the_ranged_rule_cell_by_cell() -> None:
     observed, layer = grid.observed("box"), grid.layer("box")
     near, far = (10, 7), (10, 15)  # cells on the axis at 0.75 m and 1.55 m
     assert layer[near] == pytest.approx(3.0 * observed[near])
-    half_seen = observed[far] / 0.5  # observed counts the visible share
-    assert layer[far] == pytest.approx(math.log(0.5 * math.e + 0.5) * half_seen)
+    # observed counts the view's coverage; its visibility is in the weight already
+    blind = AccumulatorGrid(["box"], spec, rule, 4)
+    blind.fuse_all((0.0, 1.0), wedge, {"box": np.array([0.9])}, 2.0)
+    assert observed[far] == pytest.approx(blind.observed("box")[far]) and observed[far] > 0
+    assert layer[far] == pytest.approx(math.log(0.5 * math.e + 0.5) * observed[far])

@@ -254,7 +254,7 @@ def test_the_calibrated_rule_waits_for_the_models_and_refuses_one_without_calibr
 
     config = load_config(None, overrides=["grid.fusion=calibrated", "grid.direction_bins=8"])
     assert config.grid.rule is None and config.grid.direction_bins == 8
-    table = SimpleNamespace(rule=lambda: make_rule("calibrated", edges=(0, 1), llr=(0.5,)))
+    table = SimpleNamespace(rule=lambda **_: make_rule("calibrated", edges=(0, 1), llr=(0.5,)))
     calibrated = SimpleNamespace(name="rice_box", calibration=table)
     grid, belief = make_grids(config, SimpleNamespace(models=[calibrated]))
     assert grid is belief and grid.rule.name == "calibrated" and grid.direction_bins == 8
@@ -262,7 +262,7 @@ def test_the_calibrated_rule_waits_for_the_models_and_refuses_one_without_calibr
     with pytest.raises(InputError, match="needs each model's score calibration; 'rice_box'"):
         make_grids(config, SimpleNamespace(models=[bare]))
     # Another rule runs without one; there is then no confidence.
-    plain = load_config(None)
+    plain = load_config(None, overrides=["grid.fusion=accumulate"])
     grid, belief = make_grids(plain, SimpleNamespace(models=[bare]))
     assert grid.rule.name == plain.grid.fusion and belief is None
     with pytest.raises(ConfigError, match=r"grid.direction_bins: expected a whole number >= 1"):

@@ -275,6 +275,7 @@ def run_batch_mission(spec: BatchSpec, run: int) -> dict[str, Any]:
         truth=truth,
         truth_pose=sim.truth_pose,
         visibility=world.visibility,
+        fuse_visibility=config.grid.visibility,
         belief=belief,
         confidence_options=config.confidence,
     )

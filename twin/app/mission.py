@@ -238,8 +238,9 @@ class Mission:
     ``visibility`` says per view what the camera could have seen; the grid weighs each wedge by
     it when ``fuse_visibility`` (the profiles are logged either way, for comparisons). ``belief``
     is a grid with the detector's calibrated rule (log-likelihood ratios), fused alongside
-    ``grid`` (which may hold another rule, or be the same grid) for each object's
-    ``confidence``, read with ``confidence_options``.
+    ``grid`` (which may hold another rule, or be the same grid), always with the visibility
+    when there is a model of it, for each object's ``confidence``, read with
+    ``confidence_options``.
     """
 
     def __init__(
@@ -290,7 +291,7 @@ class Mission:
             self.views = ViewLog(names, max_range)
         self.belief = belief
         if belief is not None and belief is not grid and belief.views(names[0]) == 0:
-            self.views.fuse_into(belief, visibility=fuse_visibility)
+            self.views.fuse_into(belief)
         # Robot time continues across resumes: this session's clock starts where the last
         # session's last view left it.
         self._clock_origin = robot.camera.now() - self.state.robot_time
@@ -336,7 +337,7 @@ class Mission:
                 used = seen if self.fuse_visibility else None
                 self.grid.fuse_all(origin, wedges, per_object, self.max_range, used)
                 if self.belief is not None and self.belief is not self.grid:
-                    self.belief.fuse_all(origin, wedges, per_object, self.max_range, used)
+                    self.belief.fuse_all(origin, wedges, per_object, self.max_range, seen)
         else:
             state.refused.append({"view": index, "reason": refusal})
             self.say(f"view {index + 1} not fused: {refusal}")

@@ -262,6 +262,7 @@ def _fly(config, robot, context, run, resume, started, quiet, on_result) -> dict
         pose_gate=gate,
         say=say,
         visibility=visibility,
+        fuse_visibility=config.grid.visibility,
         belief=belief,
         confidence_options=config.confidence,
         views=views,
@@ -329,8 +330,12 @@ def make_grids(config: SurveyConfig, detector) -> tuple[AccumulatorGrid, Accumul
     model has no calibration). ``grid.fusion = "calibrated"`` without one is refused."""
     names = [model.name for model in detector.models]
     missing = [model.name for model in detector.models if model.calibration is None]
-    calibrated = {m.name: m.calibration.rule() for m in detector.models if m.calibration}
     g = config.grid
+    calibrated = {
+        m.name: m.calibration.rule(by_distance=g.by_distance)
+        for m in detector.models
+        if m.calibration
+    }
     if g.fusion == "calibrated" and missing:
         raise InputError(
             f'grid.fusion = "calibrated" needs each model\'s score calibration; {missing[0]!r} '

@@ -100,10 +100,11 @@ class ViewLog:
         bins = max((v.visibility.profiles.shape[1] for v in self.views if v.visibility), default=0)
         profiles = np.zeros((n, columns, bins))
         steps = np.zeros(n)
+        widths = np.zeros(n, dtype=np.int64)
         for i, view in enumerate(self.views):
             if view.visibility is not None:
-                width = view.visibility.profiles.shape[1]
-                profiles[i, :, :width] = view.visibility.profiles
+                widths[i] = view.visibility.profiles.shape[1]
+                profiles[i, :, : widths[i]] = view.visibility.profiles
                 steps[i] = view.visibility.step
         header = {"objects": list(self.objects), "max_range": self.max_range}
         arrays = {
@@ -114,6 +115,7 @@ class ViewLog:
             ).reshape(n, len(self.objects), columns),
             "profiles": profiles,
             "profile_steps": steps,
+            "profile_bins": widths,
             "fused": np.array([v.fused for v in self.views], dtype=bool),
         }
         return save_arrays(path, VIEW_LOG_FORMAT, VIEW_LOG_VERSION, header, arrays)
@@ -127,11 +129,13 @@ class ViewLog:
             max_range = header["max_range"]
             origins, wedges, values = arrays["origins"], arrays["wedges"], arrays["values"]
             profiles, steps, fused = arrays["profiles"], arrays["profile_steps"], arrays["fused"]
+            widths = arrays["profile_bins"]
             n = len(origins)
             consistent = (
                 wedges.shape[:1] == values.shape[:1] == profiles.shape[:1] == (n,)
-                and len(steps) == len(fused) == n
+                and len(steps) == len(fused) == len(widths) == n
                 and values.shape[1] == len(objects)
+                and bool(np.all(widths <= profiles.shape[2]))
             )
         except (KeyError, TypeError, ValueError, IndexError) as exc:
             raise FileFormatError(f"{path}: not a complete view log ({exc})") from None
@@ -141,7 +145,8 @@ class ViewLog:
         for i in range(n):
             seen = None
             if steps[i] > 0:
-                seen = ColumnVisibility(_trim_bins(profiles[i]), float(steps[i]))
+                # Each view's own reach: beyond it a ranged rule's views count no coverage.
+                seen = ColumnVisibility(profiles[i, :, : widths[i]], float(steps[i]))
             log.append(
                 LoggedView(
                     (float(origins[i, 0]), float(origins[i, 1])),
@@ -152,9 +157,3 @@ class ViewLog:
                 )
             )
         return log
-
-
-def _trim_bins(profiles: np.ndarray) -> np.ndarray:
-    """Drop the all-zero bins a shorter profile was padded with (they mean "unseen" anyway)."""
-    seen = np.nonzero(profiles.any(axis=0))[0]
-    return profiles[:, : (seen[-1] + 1 if len(seen) else 1)]

@@ -403,7 +403,9 @@ class AccumulatorGrid:
         delta = np.zeros((len(rows) + 1, *self.spec.shape))
         if all(getattr(rule, "ranged", False) for rule in rules):
             # The rule's weight depends on the cell's distance (and visibility) too: one
-            # weight profile per object row, and the visibility for the observed row.
+            # weight profile per object row. The observed row counts the views over the cell
+            # (its visibility is in the weights already), so that direction bins average the
+            # evidence of the views from one direction, seen or not.
             seen = visibility or ColumnVisibility.everywhere(
                 len(wedges), reach if reach > 0 else self._farthest(ox, oy)
             )
@@ -412,7 +414,7 @@ class AccumulatorGrid:
                     rule.weight_profiles(v, seen.profiles, seen.step)
                     for rule, v in zip(rules, rows, strict=True)
                 ]
-                + [seen.profiles]
+                + [np.ones_like(seen.profiles)]
             )
             weights = np.ones((len(rows) + 1, len(wedges)))
             self._add(delta, ox, oy, wedges, weights, reach, profiles, seen.step)

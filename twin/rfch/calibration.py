@@ -236,8 +236,12 @@ class ScoreCalibration:
         scores = np.asarray(scores, dtype=float)
         return self._table[_bin_index(scores, np.asarray(self.edges))]
 
-    def rule(self) -> Calibrated:
-        """The ``calibrated`` fusion rule with this table (plain numbers, for twin.core)."""
+    def rule(self, by_distance: bool = False) -> Calibrated:
+        """The ``calibrated`` fusion rule with this table (plain numbers, for twin.core); with
+        ``by_distance`` the table of each distance band (measured no better in the twin's living
+        room than the pooled table, README "How sure is it?": so not the default)."""
+        if not by_distance or not self.range_on_counts:
+            return Calibrated(edges=self.edges, llr=tuple(self.table().tolist()))
         return Calibrated(
             edges=self.edges,
             llr=tuple(self.table().tolist()),
