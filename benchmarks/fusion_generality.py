@@ -105,10 +105,10 @@ def main() -> None:
     parser.add_argument("--temperature", type=float, help="confidence temperature (config's)")
     parser.add_argument(
         "--default",
-        default="calibrated +vis +dir8",
+        default="calibrated +vis",
         help="the variant whose estimate the confidence is about (the shipped config's rule)",
     )
-    parser.add_argument("--belief", default="calibrated +vis +dir8", help="the variant that is the "
+    parser.add_argument("--belief", default="calibrated +vis", help="the variant that is the "
                         "belief the confidence is read from")  # fmt: skip
     args = parser.parse_args()
 

@@ -24,7 +24,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("run", type=Path, help="a run folder with views.npz and result.json")
     parser.add_argument("--out", type=Path, help="PNG to write (only when the decision differs)")
-    parser.add_argument("--rule", help="fusion rule (default: the config's grid.fusion)")
+    parser.add_argument("--rule", help="fusion rule (default: the shipped config's grid)")
     args = parser.parse_args()
 
     from twin.app.config import load_config
@@ -34,19 +34,22 @@ def main() -> None:
     from twin.core.fusion import make_rule
     from twin.core.grid import AccumulatorGrid
 
+    # The run's own config for the scene and detector; the rule and its direction bins are the
+    # shipped default's (the runs may have been flown under another), or --rule without bins.
     config = load_config(args.run / "config.toml")
     detector = prepare_detector(config.objects, config.detector, config.cache, lambda _: None,
                                 calibration_scene=str(config.scene))  # fmt: skip
     name = config.objects[0].name
-    grid, _ = make_grids(config, detector)
+    grid, _ = make_grids(load_config(None), detector)
     rule = grid.rules if args.rule is None else make_rule(args.rule)
+    bins = grid.direction_bins if args.rule is None else 1
     log = ViewLog.load(args.run / "views.npz")
     result = json.loads((args.run / "result.json").read_text())
     truth = tuple(result["objects"][name]["truth_m"])
     spec = config.grid.spec
 
     def fused(visibility: bool, views: int | None = None) -> AccumulatorGrid:
-        grid = AccumulatorGrid([name], spec, rule, config.grid.supersample)
+        grid = AccumulatorGrid([name], spec, rule, config.grid.supersample, direction_bins=bins)
         return log.fuse_into(grid, visibility=visibility, views=views)
 
     blind, seeing = fused(False), fused(True)
@@ -58,22 +61,38 @@ def main() -> None:
               f"{math.dist((best.x, best.y), truth):.2f} m")  # fmt: skip
     if args.out is None:
         return
-    cell = (
-        int((truth[1] - spec.y_min) / spec.cell_size),
-        int((truth[0] - spec.x_min) / spec.cell_size),
-    )
-    # The view whose visibility changed the true cell's evidence most.
+
+    def cell_of(xy: tuple[float, float]) -> tuple[int, int]:
+        return int((xy[1] - spec.y_min) / spec.cell_size), int(
+            (xy[0] - spec.x_min) / spec.cell_size
+        )
+
+    # The view whose visibility most changed the true cell's standing against the wrong
+    # estimate's cell: the margin (true minus rival) it adds with visibility, less blind. When
+    # visibility helped, the rival is the blind estimate and the largest gain is drawn; when it
+    # hurt, the rival is its own estimate and the largest loss.
+    errors = {label: math.dist(xy, truth) for label, xy in estimates.items()}
+    helped = errors["with visibility"] <= errors["blind"]
+    true_cell = cell_of(truth)
+    rival = cell_of(estimates["blind" if helped else "with visibility"])
     change = []
     for i in range(len(log)):
-        with_it = fused(True, i + 1).layer(name)[cell] - fused(True, i).layer(name)[cell]
-        without = fused(False, i + 1).layer(name)[cell] - fused(False, i).layer(name)[cell]
-        change.append(with_it - without)
-    index = int(np.argmax(np.abs(change)))
+        margins = []
+        for visibility in (True, False):
+            before, after = fused(visibility, i).layer(name), fused(visibility, i + 1).layer(name)
+            step = after - before
+            margins.append(step[true_cell] - step[rival])
+        change.append(margins[0] - margins[1])
+    index = int(np.argmax(change) if helped else np.argmin(change))
     view = log.views[index]
-    print(f"view {index}: the true cell gains {change[index]:+.2f} more with visibility")
+    against = "the blind estimate's" if helped else "its own estimate's"
+    print(f"view {index}: with visibility the true cell gains {change[index]:+.2f} more on "
+          f"{against} cell than blind")  # fmt: skip
     image, depth = render_view(args.run, view, name)
+    title = (f"view {index}: with visibility the true cell (red ring) gains {change[index]:+.2f}"
+             f" more on {against} cell (white squares: the estimates) than blind")  # fmt: skip
     draw(args.out, view, image, depth, blind.layer(name), seeing.layer(name), spec, truth,
-         estimates, index, change[index], config)  # fmt: skip
+         estimates, index, title, config)  # fmt: skip
     print(f"wrote {args.out}")
 
 
@@ -95,7 +114,7 @@ def render_view(run: Path, view, name: str) -> tuple[np.ndarray, np.ndarray]:
     return frame.image, frame.depth
 
 
-def draw(out, view, image, depth, blind, seeing, spec, truth, estimates, index, change, config):
+def draw(out, view, image, depth, blind, seeing, spec, truth, estimates, index, title, config):
     from matplotlib.colors import ListedColormap
 
     from twin.app.plots import _pyplot, save_figure
@@ -137,7 +156,7 @@ def draw(out, view, image, depth, blind, seeing, spec, truth, estimates, index, 
         ax.plot([view.origin[0]], [view.origin[1]], "^", color="cyan")
         ax.set_xlim(spec.x_min, spec.x_max)
         ax.set_ylim(spec.y_min, spec.y_max)
-    fig.suptitle(f"the true cell gained {change:+.2f} more with visibility in this view")
+    fig.suptitle(title)
     save_figure(fig, out, tight=False)
 
 

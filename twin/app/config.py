@@ -31,7 +31,7 @@ from twin.resources import scenes_dir
 DEFAULT_CONFIG_NAME = "living_room_survey.toml"
 # The confidence's temperature, fitted on development runs (benchmarks/fusion_generality.py
 # --fit-temperature on seeds no reported figure uses; README "How sure is it?").
-TEMPERATURE = 0.4
+TEMPERATURE = 1.4
 RERUN_MODES = ("save", "spawn", "serve", "off")
 DEVICE_ROLES = ROLES
 TWIN_PORT = "twin"  # a serial device's port that names its serial twin (an emulator on a pty)

@@ -129,7 +129,8 @@ class ViewLog:
             max_range = header["max_range"]
             origins, wedges, values = arrays["origins"], arrays["wedges"], arrays["values"]
             profiles, steps, fused = arrays["profiles"], arrays["profile_steps"], arrays["fused"]
-            widths = arrays["profile_bins"]
+            # Logs written before the reach was kept: every view of a mission had the same.
+            widths = arrays.get("profile_bins", np.full(len(steps), profiles.shape[2]))
             n = len(origins)
             consistent = (
                 wedges.shape[:1] == values.shape[:1] == profiles.shape[:1] == (n,)
