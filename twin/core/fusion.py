@@ -160,6 +160,7 @@ class Calibrated:
     """
 
     name: ClassVar[str] = "calibrated"
+    ranged: ClassVar[bool] = True  # the grid asks weight_profiles for per-cell weights
     edges: tuple[float, ...]
     llr: tuple[float, ...]
     ranges: tuple[float, ...] = ()
@@ -199,8 +200,6 @@ class Calibrated:
         object.__setattr__(self, "llr", llr)
         object.__setattr__(self, "ranges", ranges)
         object.__setattr__(self, "range_llr", range_llr)
-
-    ranged: ClassVar[bool] = True  # the grid asks weight_profiles for per-distance weights
 
     def _score_bins(self, values: np.ndarray) -> np.ndarray:
         index = np.searchsorted(np.asarray(self.edges), values, side="right") - 1
