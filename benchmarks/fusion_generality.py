@@ -81,8 +81,10 @@ def variants(detector) -> dict[str, dict]:
     for name, rule in rules.items():
         for seen in (False, True):
             for bins in (1, 8):
-                label = f"{name}{' +vis' if seen else ''}{f' +dir{bins}' if bins > 1 else ''}"
-                out[label] = {"rule": rule, "visibility": seen, "bins": bins}
+                for room in (False, True):
+                    label = (f"{name}{' +vis' if seen else ''}{f' +dir{bins}' if bins > 1 else ''}"
+                             f"{' +room' if room else ''}")  # fmt: skip
+                    out[label] = {"rule": rule, "visibility": seen, "bins": bins, "room": room}
     return out
 
 
@@ -105,15 +107,16 @@ def main() -> None:
     parser.add_argument("--temperature", type=float, help="confidence temperature (config's)")
     parser.add_argument(
         "--default",
-        default="calibrated +vis",
+        default="accumulate +vis +room",
         help="the variant whose estimate the confidence is about (the shipped config's rule)",
     )
-    parser.add_argument("--belief", default="calibrated +vis", help="the variant that is the "
+    parser.add_argument("--belief", default="calibrated +vis +room", help="the variant that is the "
                         "belief the confidence is read from")  # fmt: skip
     args = parser.parse_args()
 
     from twin.app.config import load_config, resolve_config
-    from twin.app.detection import prepare_detector
+    from twin.app.detection import prepare_detector, room_logs
+    from twin.app.room import room_baselines
     from twin.app.view_log import ViewLog
     from twin.core.confidence import (
         confidence_within,
@@ -137,6 +140,19 @@ def main() -> None:
     spec, sep = config.grid.spec, config.grid.peak_separation
     temperature = args.temperature or config.confidence.temperature
     table = variants(detector)
+    rooms = room_logs(config.objects, config.detector, config.cache, str(config.scene))
+
+    baselines: dict[str, dict | None] = {}  # per variant, measured once
+
+    def new_grid(label: str) -> AccumulatorGrid:
+        how = table[label]
+        rules = how["rule"] if isinstance(how["rule"], dict) else {name: how["rule"]}
+        if label not in baselines:
+            room = how["room"] and room_baselines(rooms, rules, spec, config.grid.supersample)
+            baselines[label] = room or None
+        return AccumulatorGrid([name], spec, rules, config.grid.supersample,
+                               direction_bins=how["bins"], baseline=baselines[label])  # fmt: skip
+
     errors: dict[str, list[float]] = {label: [] for label in table}
     finals: list[tuple] = []  # (belief layer, truth, estimate, confidence, hit) per run
     checkpoints: list[tuple] = []  # the same after every stop of every run
@@ -146,20 +162,14 @@ def main() -> None:
         truth = result["objects"][name]["truth_m"]
         row, estimates = [], {}
         for label, how in table.items():
-            grid = AccumulatorGrid(
-                [name], spec, how["rule"], config.grid.supersample, direction_bins=how["bins"]
-            )
+            grid = new_grid(label)
             log.fuse_into(grid, visibility=how["visibility"])
             x, y = estimate(grid, name, sep)
             estimates[label] = (x, y)
             errors[label].append(math.hypot(x - truth[0], y - truth[1]))
             row.append(f"{errors[label][-1]:.2f}")
         # The confidence after every stop (checkpoints of the mission), and at its end.
-        default, belief = (
-            AccumulatorGrid([name], spec, table[label]["rule"], config.grid.supersample,
-                            direction_bins=table[label]["bins"])
-            for label in (args.default, args.belief)
-        )  # fmt: skip
+        default, belief = (new_grid(label) for label in (args.default, args.belief))
         per_stop = max(1, len(log) // len(config.mission.stops))
         for first in range(0, len(log), per_stop):
             part = ViewLog(log.objects, log.max_range)

@@ -178,7 +178,11 @@ def counted_views(monkeypatch):
         images, masks = square_views(
             (30, 40, 210), (None, 20, None, 200, None, None, 100, None), seed=1
         )
-        return CalibrationViews(images, masks, np.linspace(1.0, 4.0, len(images)))
+        n = len(images)
+        # Taken from the room's middle looking round, a wall 3 m away in every frame.
+        poses = np.stack([np.full(n, 2.25), np.full(n, 3.0), np.linspace(0, 6, n)], axis=1)
+        depths = np.full((n, 240, 320), 3.0, np.float32)
+        return CalibrationViews(images, masks, np.linspace(1.0, 4.0, n), depths, poses)
 
     monkeypatch.setattr(twin.sim, "training_views", training_views)
     monkeypatch.setattr(twin.sim.training, "calibration_views", calibration_views)
@@ -254,16 +258,19 @@ def test_roc_prints_the_llr_table_and_stores_it_when_asked(tmp_path, capsys):
 def test_calibration_views_render_the_target_among_the_furniture():
     from twin.sim.training import calibration_views
 
-    images, masks, distances = calibration_views(
-        n_placements=1, views_per_placement=4, aimed_fraction=1.0
-    )
+    views = calibration_views(n_placements=1, views_per_placement=4, aimed_fraction=1.0)
+    images, masks, distances = views.images, views.masks, views.distances
     assert images.shape == (4, 240, 320, 3) and images.dtype == np.uint8
     assert masks.shape == (4, 240, 320) and masks.dtype == bool
     assert distances.shape == (4,) and np.all(distances >= 0.6)  # min_distance from the target
+    assert views.depths.shape == (4, 240, 320) and views.poses.shape == (4, 3)
     seen = masks.reshape(4, -1).sum(axis=1)
     assert seen.max() > 50  # views aimed at the box show it (some may have it hidden)
-    again, _, _ = calibration_views(n_placements=1, views_per_placement=4, aimed_fraction=1.0)
-    np.testing.assert_array_equal(again, images)  # seeded: the same frames every time
+    # The box's pixels are nearer than the distance to its stand's far side
+    box = masks[int(np.argmax(seen))]
+    assert np.nanmedian(views.depths[int(np.argmax(seen))][box]) < distances.max() + 0.5
+    again = calibration_views(n_placements=1, views_per_placement=4, aimed_fraction=1.0)
+    np.testing.assert_array_equal(again.images, images)  # seeded: the same frames every time
 
 
 def test_a_calibration_keeps_one_table_per_distance_band() -> None:

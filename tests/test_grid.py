@@ -520,3 +520,28 @@ def test_rules_per_object_must_cover_every_object_and_be_of_one_kind() -> None:
         AccumulatorGrid(["box", "cup"], spec, {"box": Accumulate()})
     with pytest.raises(InputError, match="one kind"):
         AccumulatorGrid(["box", "cup"], spec, {"box": Accumulate(), "cup": Normalized()})
+
+
+def test_a_room_baseline_is_taken_off_each_view_in_proportion_to_what_it_saw(tmp_path):
+    from twin.core.visibility import ColumnVisibility
+
+    spec = GridSpec(0.0, 0.0, 2.0, 2.0, 0.1)
+    wedge = np.array([[-0.1, 0.1]])
+    seen = ColumnVisibility(np.array([[1.0] * 20 + [0.5] * 20]), 0.05)  # half seen beyond 1 m
+    baseline = np.full(spec.shape, 0.2)
+    plain = AccumulatorGrid(["box"], spec, Accumulate(), 4)
+    based = AccumulatorGrid(["box"], spec, Accumulate(), 4, baseline={"box": baseline})
+    for grid in (plain, based):
+        for _ in range(3):
+            grid.fuse_all((0.05, 1.0), wedge, {"box": np.array([0.5])}, None, seen)
+    # Each view's gain is its match less the room's usual, both in proportion to the share seen.
+    np.testing.assert_allclose(based.layer("box"), plain.layer("box") * (0.5 - 0.2) / 0.5)
+    assert set(based.baselines) == {"box"} and plain.baselines == {}
+    based.save(tmp_path / "g.npz")
+    loaded = AccumulatorGrid.load(tmp_path / "g.npz")
+    np.testing.assert_array_equal(loaded.baselines["box"], baseline)
+    loaded.fuse_all((0.05, 1.0), wedge, {"box": np.array([0.5])}, None, seen)
+    based.fuse_all((0.05, 1.0), wedge, {"box": np.array([0.5])}, None, seen)
+    np.testing.assert_array_equal(loaded.layer("box"), based.layer("box"))
+    with pytest.raises(InputError, match="baseline of 'box' must be finite values >= 0"):
+        AccumulatorGrid(["box"], spec, baseline={"box": -baseline})

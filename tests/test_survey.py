@@ -450,8 +450,10 @@ def test_an_interrupted_survey_writes_its_results_and_resumes(
     resumed = AccumulatorGrid.load(out / "grid.npz").layer("rice_box")
     straight = AccumulatorGrid.load(reduced_run / "grid.npz").layer("rice_box")
     # The resumed robot reaches each stop by another path and localizes there anew, so its
-    # poses differ from the straight run's by the localization's centimetre or two.
-    assert np.corrcoef(resumed.ravel(), straight.ravel())[0, 1] > 0.97
+    # poses differ from the straight run's by the localization's centimetre or two. (With the
+    # room's baseline taken off, most cells sit near 0, where such shifts weigh most: 0.96
+    # measured, 0.97+ for the paper's rule alone.)
+    assert np.corrcoef(resumed.ravel(), straight.ravel())[0, 1] > 0.94
     assert (
         math.dist(
             result["objects"]["rice_box"]["estimate_m"],
@@ -466,8 +468,9 @@ def test_the_run_logs_its_views_and_they_fuse_again_into_its_grid(reduced_run):
     log = ViewLog.load(reduced_run / "views.npz")
     assert len(log) == 24
     again = AccumulatorGrid(
-        grid.objects, grid.spec, grid.rules, grid.supersample, direction_bins=grid.direction_bins
-    )
+        grid.objects, grid.spec, grid.rules, grid.supersample,
+        direction_bins=grid.direction_bins, baseline=grid.baselines,
+    )  # fmt: skip
     log.fuse_into(again, visibility=load_config(reduced_run / "config.toml").grid.visibility)
     np.testing.assert_array_equal(again.evidence("rice_box"), grid.evidence("rice_box"))
     # The twin's depth hid something in some columns and showed the open room in others.
@@ -478,18 +481,18 @@ def test_the_run_logs_its_views_and_they_fuse_again_into_its_grid(reduced_run):
 
 def test_the_result_says_how_sure_it_is_from_the_calibrated_belief(reduced_run):
     from twin.app.config import load_config
-    from twin.app.detection import prepare_detector
+    from twin.app.detection import prepare_detector, room_logs
+    from twin.app.run import make_grids
     from twin.core.confidence import confidence_within, posterior
 
     box = read_result(reduced_run)["objects"]["rice_box"]
     config = load_config(reduced_run / "config.toml")
     detector = prepare_detector(config.objects, config.detector, config.cache, lambda _: None,
                                 calibration_scene=str(config.scene))  # fmt: skip
-    rule = detector.models[0].calibration.rule()
-    belief = AccumulatorGrid(
-        ["rice_box"], config.grid.spec, rule, config.grid.supersample,
-        direction_bins=config.grid.direction_bins,
-    )  # fmt: skip
+    rooms = room_logs(config.objects, config.detector, config.cache, str(config.scene))
+    assert set(rooms) == {"rice_box"}  # the twin measured the room's look with the calibration
+    _, belief = make_grids(config, detector, rooms)
+    assert belief.rule.name == "calibrated" and set(belief.baselines) == {"rice_box"}
     ViewLog.load(reduced_run / "views.npz").fuse_into(belief)
     options = config.confidence
     cells, p_absent = posterior(belief.layer("rice_box"), options.temperature, options.p_absent)

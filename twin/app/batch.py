@@ -193,7 +193,7 @@ class MissionWorld:
     """One worker's MuJoCo world, connected robot and trained detector, reused between runs."""
 
     def __init__(self, spec: BatchSpec) -> None:
-        from twin.app.detection import prepare_detector
+        from twin.app.detection import prepare_detector, room_logs
         from twin.app.factory import build_robot
 
         self.config = config = spec.load()
@@ -209,6 +209,7 @@ class MissionWorld:
             quiet,
             calibration_scene=str(config.scene),
         )
+        self.rooms = room_logs(config.objects, config.detector, config.cache, str(config.scene))
         self.robot.connect()
         from twin.app.visibility_models import build_visibility
 
@@ -261,7 +262,7 @@ def run_batch_mission(spec: BatchSpec, run: int) -> dict[str, Any]:
     config = world.config
     draw = draw_mission(spec, run)
     surfaces = world.reset(spec, draw)
-    grid, belief = make_grids(config, world.detector)
+    grid, belief = make_grids(config, world.detector, world.rooms)
     sim = world.sim
     truth = {
         name: tuple(float(v) for v in sim.world.body_position(body))

@@ -31,7 +31,7 @@ from twin.resources import scenes_dir
 DEFAULT_CONFIG_NAME = "living_room_survey.toml"
 # The confidence's temperature, fitted on development runs (benchmarks/fusion_generality.py
 # --fit-temperature on seeds no reported figure uses; README "How sure is it?").
-TEMPERATURE = 1.4
+TEMPERATURE = 1.23
 RERUN_MODES = ("save", "spawn", "serve", "off")
 DEVICE_ROLES = ROLES
 TWIN_PORT = "twin"  # a serial device's port that names its serial twin (an emulator on a pty)
@@ -84,6 +84,7 @@ class GridConfig:
     direction_bins: int = 1  # viewpoint-bias correction: directions a cell's evidence is kept in
     visibility: bool = True  # weigh each wedge by what the camera could see (a [visibility] model)
     by_distance: bool = False  # calibrated: each distance band's own likelihood ratios
+    room_baseline: bool = True  # subtract what the room gains a cell without the object
 
 
 @dataclass(frozen=True)
@@ -616,19 +617,18 @@ def _grid(table: _Table) -> GridConfig:
         )
     max_range = table.number("max_range", None, lambda v: v > 0.0, "a positive range in metres")
     separation = table.number("peak_separation", 0.5, lambda v: v >= 0.0, "a distance >= 0 m")
-    visibility, by_distance = table.get("visibility", True), table.get("by_distance", False)
-    for key, value in (("visibility", visibility), ("by_distance", by_distance)):
-        if not isinstance(value, bool):
-            raise table.fail(key, f"expected true or false, got {value!r}")
+    switches = {"visibility": True, "by_distance": False, "room_baseline": True}
+    for key, default in switches.items():
+        switches[key] = table.get(key, default)
+        if not isinstance(switches[key], bool):
+            raise table.fail(key, f"expected true or false, got {switches[key]!r}")
     bins = table.integer("direction_bins", 1)
     if not 1 <= bins <= 64:
         raise table.fail("direction_bins", f"expected 1 (off) to 64 directions, got {bins}")
     table.finish()
     # The calibrated rule's log-likelihood ratios come with the detector's models.
     rule = None if fusion == "calibrated" else make_rule(fusion, **params)
-    return GridConfig(
-        spec, supersample, rule, max_range, separation, fusion, bins, visibility, by_distance
-    )
+    return GridConfig(spec, supersample, rule, max_range, separation, fusion, bins, **switches)
 
 
 def _detector(table: _Table) -> dict[str, Any]:

@@ -37,7 +37,10 @@ CALIBRATION_RECIPE: dict[str, Any] = {
     "views_per_placement": 16,
     "aimed_fraction": 0.5,  # enough positives for a table per distance band
     "min_cover": 0.25,
+    # The survey's frames will not be lit as these were: each placement's lights vary.
+    "lighting": (0.7, 1.3),
 }
+ROOM_OBJECT_HEIGHT = 0.2  # m: the room log's visibility, as [visibility]'s default
 
 
 def _tree_digest(folders: Sequence[Path]) -> str:
@@ -97,7 +100,8 @@ def prepare_detector(
         for name, path in paths.items()
         if calibration_scene is not None
     }
-    if calibration_scene is not None and all(p.is_file() for p in calibrated.values()):
+    ready = all(p.is_file() and room_log_path(p).is_file() for p in calibrated.values())
+    if calibration_scene is not None and ready:
         trained = {name: RFCH.load(path) for name, path in calibrated.items()}
     else:
         if all(path.is_file() for path in paths.values()):
@@ -108,8 +112,11 @@ def prepare_detector(
                 model.save(paths[name])
         if calibration_scene is not None:
             for obj in from_scene:
-                trained[obj.name] = _calibrate(trained[obj.name], obj, calibration_scene, say)
-                trained[obj.name].save(calibrated[obj.name])
+                model, room = _calibrate(trained[obj.name], obj, calibration_scene, say)
+                # The room's log first: a calibrated model without one is calibrated again.
+                room.save(room_log_path(calibrated[obj.name]))
+                model.save(calibrated[obj.name])
+                trained[obj.name] = model
     models = [
         RFCH.load(obj.model) if obj.model is not None else trained[obj.name] for obj in objects
     ]
@@ -138,14 +145,45 @@ def calibration_key(model_key: str, scene: str | None) -> str:
     return hashlib.sha256(json.dumps(recipe, sort_keys=True).encode()).hexdigest()[:12]
 
 
-def _calibrate(model: Any, obj: ObjectConfig, scene: str, say: Callable[[str], None]) -> Any:
-    """``model`` with its score calibration measured on ``scene`` (module docstring)."""
+def room_log_path(calibrated_model: Path) -> Path:
+    """Where the room's look without the object (``twin.app.room``) is kept: beside the
+    calibrated model it was measured with."""
+    return calibrated_model.with_name(f"{calibrated_model.stem}_room.npz")
+
+
+def room_logs(
+    objects: Sequence[ObjectConfig], params: dict[str, Any], cache: Path, scene: str
+) -> dict[str, Any]:
+    """The room logs ``prepare_detector(..., calibration_scene=scene)`` measured, per object
+    trained from the scene (model files have none)."""
+    from twin.app.view_log import ViewLog
+
+    from_scene = [obj for obj in objects if obj.model is None]
+    group = [obj.name for obj in from_scene]
+    out = {}
+    for obj in from_scene:
+        stem = f"rfch_{obj.name}_{cache_key(obj, params, group)}"
+        path = cache / f"{stem}_cal{calibration_key(stem, scene)}.npz"
+        if room_log_path(path).is_file():
+            out[obj.name] = ViewLog.load(room_log_path(path))
+    return out
+
+
+def _calibrate(
+    model: Any, obj: ObjectConfig, scene: str, say: Callable[[str], None]
+) -> tuple[Any, Any]:
+    """``model`` with its score calibration measured on ``scene`` (module docstring), and the
+    room's look without the object from the same frames (``twin.app.room``)."""
+    import math
     from dataclasses import replace
 
+    from twin.app.room import room_log
     from twin.rfch import Detector
     from twin.rfch.calibration import ScoreCalibration
     from twin.rfch.roc import column_truth
-    from twin.sim import training
+    from twin.sim import World, training
+    from twin.sim.robot import PAPER_CAMERA
+    from twin.sim.supports import support_levels
 
     recipe = dict(CALIBRATION_RECIPE)
     min_cover = recipe.pop("min_cover")
@@ -163,7 +201,14 @@ def _calibrate(model: Any, obj: ObjectConfig, scene: str, say: Callable[[str], N
         distances=np.concatenate(distances),
     )
     say(f"calibration of {obj.name!r}: {calibration.describe()}")
-    return replace(model, calibration=calibration)
+    world = World(scene)
+    x0, y0, x1, y1 = world.room_bounds()
+    room = room_log(
+        obj.name, views.poses, views.depths, scores, truth, PAPER_CAMERA,
+        model.params.grid.column_spans(PAPER_CAMERA.width), support_levels(world),
+        ROOM_OBJECT_HEIGHT, math.hypot(x1 - x0, y1 - y0),
+    )  # fmt: skip
+    return replace(model, calibration=calibration), room
 
 
 def _train_from_scene(

@@ -19,7 +19,7 @@ import math
 import sys
 import time
 import uuid
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import asdict, dataclass, field, replace
 from datetime import datetime
 from pathlib import Path
@@ -33,6 +33,7 @@ from twin.app.outputs import check_output_folder, make_output_folder, removed_on
 from twin.app.plots import grid_figure
 from twin.app.record import NullRecorder, Recorder, RerunRecorder, SceneInfo
 from twin.app.survey import plan_views, run_survey
+from twin.app.view_log import ViewLog
 from twin.app.visibility_models import build_visibility
 from twin.core.errors import InputError, Terminated, TwinError
 from twin.core.grid import AccumulatorGrid
@@ -218,7 +219,7 @@ def _fly(config, robot, context, run, resume, started, quiet, on_result) -> dict
     """The run proper, once the devices (and any serial twins) exist."""
     from tqdm import tqdm
 
-    from twin.app.detection import prepare_detector
+    from twin.app.detection import prepare_detector, room_logs
 
     out, options = run.folder, run.options
     setup_started = time.perf_counter()
@@ -229,7 +230,8 @@ def _fly(config, robot, context, run, resume, started, quiet, on_result) -> dict
     detector = prepare_detector(
         config.objects, config.detector, config.cache, say, calibration_scene=str(config.scene)
     )
-    grid, belief = make_grids(config, detector)
+    rooms = room_logs(config.objects, config.detector, config.cache, str(config.scene))
+    grid, belief = make_grids(config, detector, rooms)
     checkpoint = Checkpoint(out)
     state = MissionState()
     views = None
@@ -301,7 +303,7 @@ def _fly(config, robot, context, run, resume, started, quiet, on_result) -> dict
         if config.grid.fusion == "calibrated":
             belief = grid
         elif belief is not None:
-            belief = make_grids(config, detector)[1]  # refilled from the log
+            belief = make_grids(config, detector, rooms)[1]  # refilled from the log
         mission = Mission(
             robot,
             detector,
@@ -324,10 +326,19 @@ def _fly(config, robot, context, run, resume, started, quiet, on_result) -> dict
     return result
 
 
-def make_grids(config: SurveyConfig, detector) -> tuple[AccumulatorGrid, AccumulatorGrid | None]:
+def make_grids(
+    config: SurveyConfig, detector, rooms: Mapping[str, ViewLog] | None = None
+) -> tuple[AccumulatorGrid, AccumulatorGrid | None]:
     """The mission's grid (the configured rule) and its belief grid (the detector's calibrated
     log-likelihood ratios, for the confidence: the same grid when that is the rule; None when a
-    model has no calibration). ``grid.fusion = "calibrated"`` without one is refused."""
+    model has no calibration). ``grid.fusion = "calibrated"`` without one is refused.
+
+    ``rooms`` (``twin.app.detection.room_logs``): the room's look without each object; with
+    ``grid.room_baseline`` a grid fused with visibility subtracts what the room gains a cell
+    by itself (``twin.app.room``). The baseline is per share of a cell seen, so a blind grid
+    (``grid.visibility = false``, or no visibility model) gets none."""
+    from twin.app.room import room_baselines
+
     names = [model.name for model in detector.models]
     missing = [model.name for model in detector.models if model.calibration is None]
     g = config.grid
@@ -342,15 +353,21 @@ def make_grids(config: SurveyConfig, detector) -> tuple[AccumulatorGrid, Accumul
             "has none: store one with 'twin roc --store', train it from the scene (objects.NAME."
             "body), or choose another grid.fusion"
         )
-    belief = None
-    if not missing:
-        belief = AccumulatorGrid(
-            names, g.spec, calibrated, g.supersample, direction_bins=g.direction_bins
+    seeing = config.visibility.source != "none"
+    rooms = dict(rooms or {}) if g.room_baseline and seeing else {}
+
+    def grid_of(rules: dict[str, Any], fused_seeing: bool = True) -> AccumulatorGrid:
+        known = {name: log for name, log in rooms.items() if name in rules and fused_seeing}
+        baseline = room_baselines(known, rules, g.spec, g.supersample) if known else None
+        return AccumulatorGrid(
+            names, g.spec, rules, g.supersample, direction_bins=g.direction_bins, baseline=baseline
         )
+
     if g.fusion == "calibrated":
-        return belief, belief
-    grid = AccumulatorGrid(names, g.spec, g.rule, g.supersample, direction_bins=g.direction_bins)
-    return grid, belief
+        grid = grid_of(calibrated, g.visibility)
+        return grid, grid
+    belief = None if missing else grid_of(calibrated)  # always fused with visibility
+    return grid_of(dict.fromkeys(names, g.rule), g.visibility), belief
 
 
 def _scene_world(config: SurveyConfig):

@@ -224,6 +224,12 @@ class AccumulatorGrid:
     B > 1 the sums are kept per direction sector from the cell to the camera and each sector
     counts at most as one full view. B = 1 (the default) is the paper's grid exactly. The prior
     is added once to the corrected evidence, not averaged with the views.
+
+    ``baseline`` (per object an (ny, nx) array, in the rule's weight units, >= 0) is what a view
+    adds to a cell of this room when the object is not there — a fruit bowl that looks like the
+    sought box gains every time it is seen. Each view's gain at a cell is reduced by it, in
+    proportion to how much of the cell the view saw, so only what is more than the room's usual
+    look counts.
     """
 
     def __init__(
@@ -234,6 +240,7 @@ class AccumulatorGrid:
         supersample: int = 10,
         prior: Prior | Mapping[str, Prior] | None = None,
         direction_bins: int = 1,
+        baseline: Mapping[str, np.ndarray] | None = None,
     ) -> None:
         names = list(objects)
         if not names:
@@ -264,6 +271,15 @@ class AccumulatorGrid:
         self._evidence = np.zeros(shape)
         self._observed = np.zeros(shape)
         self._prior = np.zeros((len(names), *spec.shape))
+        self._baseline = np.zeros((len(names), *spec.shape))
+        for name, layer in (baseline or {}).items():
+            values = np.asarray(layer, dtype=float)
+            if values.shape != spec.shape or not np.all(np.isfinite(values)) or values.min() < 0:
+                raise InputError(
+                    f"the baseline of {name!r} must be finite values >= 0 of the grid's shape "
+                    f"{spec.shape}, got shape {values.shape}"
+                )
+            self._baseline[self._object_index(name)] = values
         self._views = np.zeros(len(names), dtype=np.int64)
         if prior is not None:
             for name in names:
@@ -275,6 +291,15 @@ class AccumulatorGrid:
                     self._prior[i] = layer
 
     # -- reading -------------------------------------------------------------------------
+
+    @property
+    def baselines(self) -> dict[str, np.ndarray]:
+        """The objects that have a room baseline, and a copy of it (see the class docstring)."""
+        return {
+            name: self._baseline[i].copy()
+            for name, i in self._index.items()
+            if self._baseline[i].any()
+        }
 
     @property
     def rule(self) -> FusionRule:
@@ -414,10 +439,13 @@ class AccumulatorGrid:
                     rule.weight_profiles(v, seen.profiles, seen.step)
                     for rule, v in zip(rules, rows, strict=True)
                 ]
-                + [np.ones_like(seen.profiles)]
+                + [np.ones_like(seen.profiles), seen.profiles]
             )
-            weights = np.ones((len(rows) + 1, len(wedges)))
+            delta = np.zeros((len(rows) + 2, *self.spec.shape))
+            weights = np.ones((len(rows) + 2, len(wedges)))
             self._add(delta, ox, oy, wedges, weights, reach, profiles, seen.step)
+            seen_share = delta[-1]
+            delta = delta[:-1]
         else:
             weights = np.stack(
                 [rule.column_weights(v) for rule, v in zip(rules, rows, strict=True)]
@@ -425,6 +453,10 @@ class AccumulatorGrid:
             )
             shared = None if visibility is None else visibility.profiles[None]
             self._add(delta, ox, oy, wedges, weights, reach, shared, getattr(visibility, "step", 1))
+            seen_share = delta[-1]
+        for k, i in enumerate(indices):
+            if self._baseline[i].any():
+                delta[k] -= self._baseline[i] * seen_share
         if self.direction_bins == 1:
             for k, i in enumerate(indices):
                 self._evidence[i, 0] += delta[k]
@@ -458,11 +490,13 @@ class AccumulatorGrid:
             header["rules"] = {
                 name: {"name": rule.name, **rule.params()} for name, rule in self.rules.items()
             }
+        extra = {"baseline": self._baseline} if self._baseline.any() else {}
         if self.direction_bins == 1:
             arrays = {
                 "evidence": self._evidence[:, 0],
                 "observed": self._observed[:, 0],
                 "views": self._views,
+                **extra,
             }
             return save_arrays(path, GRID_FORMAT, 1, header, arrays)
         header["direction_bins"] = self.direction_bins
@@ -471,6 +505,7 @@ class AccumulatorGrid:
             "observed": self._observed,
             "prior": self._prior,
             "views": self._views,
+            **extra,
         }
         return save_arrays(path, GRID_FORMAT, GRID_FORMAT_VERSION, header, arrays)
 
@@ -521,6 +556,9 @@ class AccumulatorGrid:
                 raise ValueError("the evidence is not finite")
             if not (np.all(np.isfinite(observed)) and np.all(observed >= 0.0)):
                 raise ValueError("the observed counts are not finite and non-negative")
+            baseline = np.asarray(arrays.get("baseline", np.zeros((n, *spec.shape))), dtype=float)
+            if baseline.shape != (n, *spec.shape) or not np.all(np.isfinite(baseline)):
+                raise ValueError("the baseline is not a finite layer per object")
         except (KeyError, TypeError, ValueError, IndexError, InputError) as exc:
             raise FileFormatError(
                 f"{path}: grid file is inconsistent ({exc}); re-create it"
@@ -532,6 +570,7 @@ class AccumulatorGrid:
         grid._evidence = np.ascontiguousarray(evidence)
         grid._observed = np.ascontiguousarray(observed)
         grid._prior = np.ascontiguousarray(prior)
+        grid._baseline = np.ascontiguousarray(baseline)
         grid._views = views.astype(np.int64)
         return grid
 

@@ -87,11 +87,15 @@ def training_views(
 
 
 class CalibrationViews(NamedTuple):
-    """Frames for a score calibration, their target masks and the target's distance (m)."""
+    """Frames for a score calibration, their target masks and the target's distance (m); and
+    for a model of the room's own look, each frame's depth (m along the rays, NaN beyond) and
+    the robot's pose (x, y, yaw: m, m, rad) it was taken from."""
 
     images: np.ndarray
     masks: np.ndarray
     distances: np.ndarray
+    depths: np.ndarray | None = None
+    poses: np.ndarray | None = None
 
 
 def calibration_views(
@@ -104,6 +108,7 @@ def calibration_views(
     min_distance: float = 0.6,
     width: int = PAPER_CAMERA.width,
     height: int = PAPER_CAMERA.height,
+    lighting: tuple[float, float] = (1.0, 1.0),
 ) -> CalibrationViews:
     """Head-camera frames of ``scene`` with the target at random furniture tops, and its masks.
 
@@ -116,9 +121,13 @@ def calibration_views(
     view (so it lands anywhere across the frame, or is hidden behind furniture); the others
     face a uniformly random direction and mostly miss it, as most survey views do.
 
+    Each placement's lights are scaled by a factor drawn uniformly from ``lighting`` (the
+    survey's frames will not be lit as the calibration's were).
+
     Returns ``images`` (N, H, W, 3) uint8 RGB, ``masks`` (N, H, W) bool (the target's pixels,
-    from segmentation) and ``distances`` (N,) metres in the plan from the robot to the target,
-    N = n_placements x views_per_placement, placement-major.
+    from segmentation), ``distances`` (N,) metres in the plan from the robot to the target,
+    ``depths`` (N, H, W) and ``poses`` (N, 3), N = n_placements x views_per_placement,
+    placement-major.
     """
     if n_placements < 1 or views_per_placement < 1:
         raise InputError(
@@ -136,11 +145,12 @@ def calibration_views(
     obstacles = [world.footprint(name).polygon for name in world.furniture()]
     half_fov = 0.5 * PAPER_CAMERA.hfov
     aimed = round(aimed_fraction * views_per_placement)
-    images, masks, distances = [], [], []
+    images, masks, distances, depths, poses = [], [], [], [], []
     with FrameRenderer(world.model, width, height, CAMERA_NAME) as renderer:
         for i in range(n_placements):
             rng = np.random.default_rng(seed + i)
             spot = random_surface_pose(world, target, rng)
+            world.scale_lighting(float(rng.uniform(*lighting)))
             for k in range(views_per_placement):
                 x, y = _free_floor_point(world, obstacles, (spot.x, spot.y), min_distance, rng)
                 if k < aimed:
@@ -151,8 +161,12 @@ def calibration_views(
                 robot.place(Pose2D(x, y, float(yaw)), settle=0.0)
                 images.append(renderer.render(world.data))
                 masks.append(np.isin(renderer.segment(world.data), geoms))
+                depths.append(renderer.depth(world.data))
                 distances.append(math.dist((x, y), (spot.x, spot.y)))
-    return CalibrationViews(np.stack(images), np.stack(masks), np.array(distances))
+                poses.append((x, y, float(yaw)))
+    return CalibrationViews(
+        np.stack(images), np.stack(masks), np.array(distances), np.stack(depths), np.array(poses)
+    )
 
 
 def _free_floor_point(

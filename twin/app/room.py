@@ -1,0 +1,82 @@
+"""What the room looks like to the detector without the sought object: a baseline per cell.
+
+A persistent look-alike — the fruit bowl that scores like the rice box from every stop — gains
+evidence every time it is seen, and the estimate goes to it whenever the target is weakened.
+The twin knows the room: the calibration's frames (other poses than any mission's, the lights
+varied) are fused, the object's own columns left out, into a grid; what a cell gains there per
+full view of it is what the room gains it without the object. A mission's grid subtracts that,
+view by view, in proportion to how much of the cell each view saw
+(``AccumulatorGrid(baseline=...)``), so a cell counts only for looking more like the object than
+the room usually does. Only the positive part is subtracted: the room's ordinary silence stays
+evidence against the object.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+
+import numpy as np
+
+from twin.app.view_log import LoggedView, ViewLog
+from twin.core.fusion import FusionRule, make_rule
+from twin.core.geometry import CameraModel, Pose2D
+from twin.core.grid import AccumulatorGrid, GridSpec
+from twin.core.visibility import ColumnVisibility, SupportLevels, visibility_from_depth
+
+MIN_SEEN = 1.0  # full views of a cell before its baseline is trusted
+
+
+def room_log(
+    name: str,
+    poses: np.ndarray,
+    depths: np.ndarray,
+    scores: list[np.ndarray],
+    truth: list[np.ndarray],
+    camera: CameraModel,
+    column_spans: np.ndarray,
+    supports: SupportLevels,
+    object_height: float,
+    reach: float,
+    camera_height: float = 1.0,
+) -> ViewLog:
+    """The calibration frames as a view log of the room without ``name``: each frame's column
+    scores over its wedges, visibility from its depth, and the columns that touch the object
+    (``truth`` not 0) seen nowhere, so they say nothing about the room."""
+    log = ViewLog([name], reach)
+    for (x, y, yaw), depth, values, labels in zip(poses, depths, scores, truth, strict=True):
+        seen = visibility_from_depth(
+            depth, camera, column_spans, origin=(x, y), axis=yaw, tilt=0.0,
+            camera_height=camera_height, supports=supports, object_height=object_height,
+            reach=reach,
+        )  # fmt: skip
+        profiles = np.where((np.asarray(labels) == 0)[:, None], seen.profiles, 0.0)
+        wedges = camera.wedges(Pose2D(x, y, yaw), 0.0, column_spans)
+        visibility = ColumnVisibility(profiles, seen.step)
+        log.append(LoggedView((x, y), wedges, {name: np.asarray(values)}, visibility))
+    return log
+
+
+def room_baselines(
+    logs: Mapping[str, ViewLog],
+    rules: Mapping[str, FusionRule],
+    spec: GridSpec,
+    supersample: int,
+) -> dict[str, np.ndarray]:
+    """Per object, what a full view of each cell adds to it under ``rules[name]`` in the room
+    without the object (0 where the room's views saw a cell less than ``MIN_SEEN`` times, and
+    where it adds nothing or takes away)."""
+    out = {}
+    for name, log in logs.items():
+        gained = AccumulatorGrid([name], spec, rules[name], supersample)
+        log.fuse_into(gained)
+        # How much of each cell the room's views saw (every weight 1, scaled by visibility).
+        seen = AccumulatorGrid([name], spec, make_rule("accumulate"), supersample)
+        for view in log.views:
+            ones = {name: np.ones(len(view.wedges))}
+            seen.fuse_all(view.origin, view.wedges, ones, log.max_range, view.visibility)
+        share = seen.evidence(name)
+        per_view = np.divide(
+            gained.evidence(name), share, out=np.zeros(spec.shape), where=share >= MIN_SEEN
+        )
+        out[name] = np.maximum(per_view, 0.0)
+    return out
