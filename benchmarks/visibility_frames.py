@@ -4,8 +4,9 @@
 
 Takes a run flown by ``benchmarks/fusion_generality.py`` (``--place-target random``), fuses its
 view log with ``--rule`` (default: the shipped config's) twice, blind and with the visibility
-model, and, when the two decisions differ, draws the view whose visibility changed the true
-cell's evidence most: its frame and depth re-rendered in the twin at the view's pose (the
+model (and, for the shipped rule, the room's baseline that visibility makes possible), and,
+when the two decisions differ, draws the view whose visibility changed the true cell's
+evidence most: its frame and depth re-rendered in the twin at the view's pose (the
 run's placement is re-made from its seed), the cells of that view the depth hid, and the two
 final grids with the truth and both estimates. Prints the two errors either way.
 """
@@ -28,7 +29,7 @@ def main() -> None:
     args = parser.parse_args()
 
     from twin.app.config import load_config
-    from twin.app.detection import prepare_detector
+    from twin.app.detection import prepare_detector, room_logs
     from twin.app.run import make_grids
     from twin.app.view_log import ViewLog
     from twin.core.fusion import make_rule
@@ -40,16 +41,21 @@ def main() -> None:
     detector = prepare_detector(config.objects, config.detector, config.cache, lambda _: None,
                                 calibration_scene=str(config.scene))  # fmt: skip
     name = config.objects[0].name
-    grid, _ = make_grids(load_config(None), detector)
+    rooms = room_logs(config.objects, config.detector, config.cache, str(config.scene))
+    grid, _ = make_grids(load_config(None), detector, rooms)
     rule = grid.rules if args.rule is None else make_rule(args.rule)
     bins = grid.direction_bins if args.rule is None else 1
+    # With visibility, the default also takes the room's look off (a blind grid cannot: the
+    # baseline is per share of a cell seen), so "blind" is the rule as the paper fuses it.
+    baseline = grid.baselines if args.rule is None else None
     log = ViewLog.load(args.run / "views.npz")
     result = json.loads((args.run / "result.json").read_text())
     truth = tuple(result["objects"][name]["truth_m"])
     spec = config.grid.spec
 
     def fused(visibility: bool, views: int | None = None) -> AccumulatorGrid:
-        grid = AccumulatorGrid([name], spec, rule, config.grid.supersample, direction_bins=bins)
+        grid = AccumulatorGrid([name], spec, rule, config.grid.supersample, direction_bins=bins,
+                               baseline=baseline if visibility else None)  # fmt: skip
         return log.fuse_into(grid, visibility=visibility, views=views)
 
     blind, seeing = fused(False), fused(True)
