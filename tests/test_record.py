@@ -325,6 +325,8 @@ def test_colour_scale_is_fixed_for_the_run(survey) -> None:
 def test_scales_follow_the_rule_and_the_plan() -> None:
     assert (colour_scale(Accumulate(), 40).lo, colour_scale(Accumulate(), 40).hi) == (0.0, 2.5)
     assert colour_scale(Accumulate(), 160).hi == 10.0
+    # With the room's usual look taken off (0.12 a column), the object gains only the rest.
+    assert colour_scale(Accumulate(), 40, baseline=0.12).hi == 1.5
     assert colour_scale(Normalized(), 40).hi == 0.5
     logodds = colour_scale(LogOdds(p_fp=0.1, p_fn=0.05, threshold=0.162), 40)
     assert (logodds.lo, logodds.hi) == (-20.0, 20.0)  # 10 looks at ~2 log-odds each

@@ -207,7 +207,7 @@ class ColourScale:
         return f"colour {self.lo:g} to {self.hi:g}, saturating beyond"
 
 
-def colour_scale(rule: FusionRule, planned_views: int) -> ColourScale:
+def colour_scale(rule: FusionRule, planned_views: int, baseline: float = 0.0) -> ColourScale:
     """The fixed colour scale of a layer fused by ``rule`` over ``planned_views`` views.
 
     A camera with a 45-degree field of view sees a given cell in about one of the
@@ -218,6 +218,8 @@ def colour_scale(rule: FusionRule, planned_views: int) -> ColourScale:
     weight of a detector with the rule's miss rate; ``calibrated`` (symmetric), half the
     strongest log-likelihood ratio per column and look; ``normalized`` is a mean match, 0 to a
     strong one (``STRONG_MATCH``). Tops are rounded up by ``nice_ceil``; a clear peak saturates.
+    ``baseline`` is the room's usual gain per column and look where the grid takes one off
+    (``AccumulatorGrid(baseline=...)``): an additive rule's object then gains only the rest.
     """
     looks = max(1.0, planned_views / VIEWS_PER_SWEEP) * COLUMNS_PER_CELL
     if rule.name == "normalized":
@@ -234,7 +236,7 @@ def colour_scale(rule: FusionRule, planned_views: int) -> ColourScale:
         strongest = max(float(v) for v in getattr(rule, "llr", (1.0,)))
         top = nice_ceil(max(1.0, looks * 0.5 * strongest))
         return ColourScale(-top, top, "cyantoyellow")
-    return ColourScale(0.0, nice_ceil(TYPICAL_MATCH * looks), "viridis")
+    return ColourScale(0.0, nice_ceil(max(TYPICAL_MATCH - baseline, 0.05) * looks), "viridis")
 
 
 def clip_to_rect(polygon: np.ndarray, extent: tuple[float, float, float, float]) -> np.ndarray:
@@ -411,7 +413,16 @@ class RerunRecorder:
         self._extent = tuple(float(v) for v in scene.extent)
         self._peak_separation = scene.peak_separation
         self._planned = planned_views
-        self._scales = {name: colour_scale(grid.rule, planned_views) for name in grid.objects}
+        baselines = grid.baselines
+        self._scales = {
+            name: colour_scale(
+                grid.rules[name],
+                planned_views,
+                # the room's usual where the room has seen the object's kind of thing at all
+                float(np.median(b[b > 0])) if (b := baselines.get(name)) is not None else 0.0,
+            )
+            for name in grid.objects
+        }
         self.stream.send_blueprint(self._blueprint(scene, grid), make_active=True)
         log("world", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
         log(MAP, rr.Transform3D(scale=[1.0, -1.0, 1.0]), static=True)  # north up in 2-D
