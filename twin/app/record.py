@@ -586,9 +586,14 @@ class RerunRecorder:
         x0, y0, x1, y1 = self._extent
         cx, cy = 0.5 * (x0 + x1), 0.5 * (y0 + y1)
         size = max(x1 - x0, y1 - y0)
+        less = " less the room's usual look"
+        fused = {
+            name: grid.rules[name].name + (less if name in grid.baselines else "")
+            for name in grid.objects
+        }
         maps = [
             rrb.Spatial2DView(
-                name=f"{name}: grid from above, {grid.rule.name}, {self._scales[name].describe()}",
+                name=f"{name}: grid from above, {fused[name]}, {self._scales[name].describe()}",
                 origin="top",
                 contents=["+ /top/**", "- /top/map/objects/**", f"+ /top/map/objects/{name}/**"],
                 # The view's y is the map's -y (the flip at top/map); room for ticks and legend.
