@@ -233,13 +233,9 @@ def _fly(config, robot, context, run, resume, started, quiet, on_result) -> dict
     rooms = room_logs(config.objects, config.detector, config.cache, str(config.scene))
     grid, belief = make_grids(config, detector, rooms)
     checkpoint = Checkpoint(out)
-    state = MissionState()
-    views = None
-    if resume and (loaded := checkpoint.load(grid)) is not None:
-        grid, state = loaded
-        views = checkpoint.load_views(state)
-        if config.grid.fusion == "calibrated":
-            belief = grid
+    state, views = MissionState(), None
+    if resume and checkpoint.grid_path.is_file():
+        grid, state, views, belief = _checkpointed(checkpoint, config, detector, rooms)
     plan = plan_views(config.mission, robot.pantilt.limits)
     recorder = _recorder(out, options, resume, say)
     gate = None
@@ -298,12 +294,7 @@ def _fly(config, robot, context, run, resume, started, quiet, on_result) -> dict
         if not checkpoint.grid_path.is_file():
             raise stopped_by  # nothing fused yet: nothing to report
         # The grid in memory may hold half a view: report what the checkpoint holds.
-        grid, state = checkpoint.load(grid) or (grid, state)
-        views = checkpoint.load_views(state)
-        if config.grid.fusion == "calibrated":
-            belief = grid
-        elif belief is not None:
-            belief = make_grids(config, detector, rooms)[1]  # refilled from the log
+        grid, state, views, belief = _checkpointed(checkpoint, config, detector, rooms)
         mission = Mission(
             robot,
             detector,
@@ -324,6 +315,15 @@ def _fly(config, robot, context, run, resume, started, quiet, on_result) -> dict
         on_result(result)
     recorder.wait()
     return result
+
+
+def _checkpointed(checkpoint: Checkpoint, config: SurveyConfig, detector, rooms):
+    """The checkpoint's grid, state and view log, and the belief to go with them: the grid
+    itself for the calibrated rule, else a fresh one that the ``Mission`` refills from the log."""
+    fresh, belief = make_grids(config, detector, rooms)
+    grid, state = checkpoint.load(fresh) or (fresh, MissionState())
+    views = checkpoint.load_views(state)
+    return grid, state, views, grid if config.grid.fusion == "calibrated" else belief
 
 
 def make_grids(
