@@ -225,7 +225,9 @@ def _fly(config, robot, context, run, resume, started, quiet, on_result) -> dict
     setup_started = time.perf_counter()
     sim = context.sim_in_use
     truth = _truth(config, sim)
-    scene = _scene_info(config, sim, truth)
+    # The room: the twin's own world, or on the robot the scene file loaded once as its model.
+    world = sim.world if sim is not None else _scene_world(config)
+    scene = _scene_info(config, world, truth)
     say = (lambda _: None) if quiet else print
     detector = prepare_detector(
         config.objects, config.detector, config.cache, say, calibration_scene=str(config.scene)
@@ -245,7 +247,6 @@ def _fly(config, robot, context, run, resume, started, quiet, on_result) -> dict
         gate = PoseGate(o.max_sigma_m, math.radians(o.max_sigma_deg))
         occupancy = robot.base.map
         scene = replace(scene, occupancy=occupancy)
-    world = sim.world if sim is not None else _scene_world(config)
     visibility = build_visibility(config, world, robot.camera.model, occupancy)
     mission = Mission(
         robot,
@@ -451,9 +452,8 @@ def _truth(config: SurveyConfig, sim) -> dict[str, tuple[float, float, float]]:
     }
 
 
-def _scene_info(config: SurveyConfig, sim, truth) -> SceneInfo:
+def _scene_info(config: SurveyConfig, world, truth) -> SceneInfo:
     """The room's outline and furniture from the scene file (the map, on the real robot too)."""
-    world = sim.world if sim is not None else _scene_world(config)
     furniture = tuple(world.footprints()[name] for name in world.furniture())
     return SceneInfo(world.room_bounds(), furniture, dict(truth), config.grid.peak_separation)
 
