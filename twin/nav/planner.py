@@ -110,9 +110,13 @@ def _octile(r: int, c: int, goal_r: int, goal_c: int) -> float:
 
 
 @njit(cache=True)
-def astar(blocked: np.ndarray, start_r: int, start_c: int, goal_r: int, goal_c: int) -> np.ndarray:
-    """Shortest 8-connected path of unblocked cells from start to goal, (n, 2) (row, col) from
-    start to goal, or (0, 2) if there is none. Diagonal steps need both side cells unblocked."""
+def _expand(
+    blocked: np.ndarray, start_r: int, start_c: int, goal_r: int, goal_c: int
+) -> tuple[np.ndarray, np.ndarray, bool]:
+    """Best-first search over the 8-connected grid of unblocked cells from the start: A* to the
+    goal (octile heuristic), or, with ``goal_r < 0``, Dijkstra over every reachable cell.
+    Returns (cost in cells per flat index, parent per flat index, goal reached). Diagonal steps
+    need both side cells unblocked."""
     ny, nx = blocked.shape
     total = ny * nx
     g = np.full(total, np.inf)
@@ -121,10 +125,10 @@ def astar(blocked: np.ndarray, start_r: int, start_c: int, goal_r: int, goal_c: 
     keys = np.empty(8 * total + 1)
     nodes = np.empty(8 * total + 1, dtype=np.int64)
     start = start_r * nx + start_c
-    goal = goal_r * nx + goal_c
-    g[start] = 0.0
+    goal = goal_r * nx + goal_c if goal_r >= 0 else -1
     # a hair of weight on the heuristic breaks ties towards the goal (far fewer expansions)
-    tie = 1.0 + 1e-6
+    tie = 1.0 + 1e-6 if goal >= 0 else 0.0
+    g[start] = 0.0
     size = _heap_push(keys, nodes, 0, tie * _octile(start_r, start_c, goal_r, goal_c), start)
     found = False
     while size > 0:
@@ -159,8 +163,19 @@ def astar(blocked: np.ndarray, start_r: int, start_c: int, goal_r: int, goal_c: 
                     parent[neighbour] = node
                     key = cost + tie * _octile(rr, cc, goal_r, goal_c)
                     size = _heap_push(keys, nodes, size, key, neighbour)
+    return g, parent, found
+
+
+@njit(cache=True)
+def astar(blocked: np.ndarray, start_r: int, start_c: int, goal_r: int, goal_c: int) -> np.ndarray:
+    """Shortest 8-connected path of unblocked cells from start to goal, (n, 2) (row, col) from
+    start to goal, or (0, 2) if there is none. Diagonal steps need both side cells unblocked."""
+    nx = blocked.shape[1]
+    _, parent, found = _expand(blocked, start_r, start_c, goal_r, goal_c)
     if not found:
         return np.empty((0, 2), dtype=np.int64)
+    start = start_r * nx + start_c
+    goal = goal_r * nx + goal_c
     count = 1
     node = goal
     while node != start:
@@ -173,6 +188,14 @@ def astar(blocked: np.ndarray, start_r: int, start_c: int, goal_r: int, goal_c: 
         path[k, 1] = node % nx
         node = parent[node]
     return path
+
+
+@njit(cache=True)
+def grid_distances(blocked: np.ndarray, start_r: int, start_c: int) -> np.ndarray:
+    """(ny, nx) length in cells of the shortest 8-connected path of unblocked cells from the
+    start to every cell (the same moves as ``astar``); inf where none reaches."""
+    g, _, _ = _expand(blocked, start_r, start_c, -1, -1)
+    return g.reshape(blocked.shape)
 
 
 @njit(cache=True, inline="always")
@@ -375,6 +398,24 @@ class PathPlanner:
         grid = (points - np.array(self.map.origin[:2])) / res
         keep = straighten(self.blocked, np.ascontiguousarray(grid))
         return Path(waypoints=points[keep], cells=cells)
+
+    def distances_from(self, start: Point) -> np.ndarray:
+        """(ny, nx) metres along the shortest grid path from ``start`` to every cell of the map
+        (inf where the robot cannot go): one search prices every goal at once, e.g. all the
+        places a view could be taken from. The grid path is an upper bound of the straightened
+        legs' length (by at most ~8 %). A start inside the inflated obstacles (a robot that
+        ended a leg a hair too close) starts from the nearest free cell."""
+        x, y = _xy(start, "start")
+        row, col = (int(v) for v in self.map.cell_of(x, y))
+        ny, nx = self.map.shape
+        if not (0 <= row < ny and 0 <= col < nx) or self.blocked[row, col]:
+            rows, cols = np.nonzero(~self.blocked)
+            if rows.size == 0:
+                return np.full(self.map.shape, np.inf)
+            cx, cy = self.map.center_of(rows, cols)
+            k = int(np.argmin(np.hypot(cx - x, cy - y)))
+            row, col = int(rows[k]), int(cols[k])
+        return grid_distances(self.blocked, row, col) * self.map.resolution
 
     def leg_is_clear(self, a: Point, b: Point) -> bool:
         """Whether the straight leg a -> b (metres) touches only unblocked cells of this
