@@ -228,13 +228,15 @@ def localized_base(config: SurveyConfig, context: BuildContext, base, laser) -> 
     o = config.localization
     assert o is not None and laser is not None  # the config checked both
     from twin.nav.maps import load_map
+    from twin.sim.scene_map import drive_map, scene_map
 
+    # the room's model: the twin's world, or on the robot the scene file
+    sim = context.sim_in_use
+    world = sim.world if sim is not None else _scene_model(config)
     if config.map_file is not None:
         occupancy = load_map(config.map_file)
     else:
-        from twin.sim.scene_map import scene_map
-
-        occupancy = scene_map(context.sim.world, laser.mount.z, o.resolution)
+        occupancy = scene_map(world, laser.mount.z, o.resolution)
     settings = LocalizerSettings(
         particles=o.particles,
         beams=o.beams,
@@ -242,4 +244,11 @@ def localized_base(config: SurveyConfig, context: BuildContext, base, laser) -> 
         seed=o.seed,
     )
     start = None if o.global_start else context.start
-    return LaserLocalizedBase(base, laser, occupancy, settings, start)
+    drive = drive_map(world, occupancy)  # plan round what the laser's plane misses (table tops)
+    return LaserLocalizedBase(base, laser, occupancy, settings, start, drive)
+
+
+def _scene_model(config: SurveyConfig):
+    from twin.sim import World
+
+    return World(config.scene)

@@ -69,6 +69,9 @@ class LaserLocalizedBase(Base):
 
     ``start`` is where the mission says the robot stands (the filter starts around it with the
     settings' ``start_sigma``); ``None`` localizes globally over the map's free cells.
+    ``drive_map`` (default: ``occupancy``) is what legs are planned on: the laser's map with
+    what the laser cannot see added, e.g. a table top above its plane
+    (``twin.sim.scene_map.drive_map``).
     """
 
     def __init__(
@@ -78,6 +81,7 @@ class LaserLocalizedBase(Base):
         occupancy: OccupancyMap,
         settings: LocalizerSettings | None = None,
         start: Pose2D | None = None,
+        drive_map: OccupancyMap | None = None,
     ) -> None:
         self.inner, self.laser, self.map = base, laser, occupancy
         self.settings = settings or LocalizerSettings()
@@ -86,11 +90,11 @@ class LaserLocalizedBase(Base):
         # one distance transform for the filter and the planner
         self._distance = obstacle_distance(occupancy)
         self.planner = PathPlanner(
-            occupancy,
+            occupancy if drive_map is None else drive_map,
             self.settings.robot_radius,
             self.settings.margin,
             unknown_is_obstacle=False,
-            distance=self._distance,
+            distance=self._distance if drive_map is None else None,
         )
         self._table = LikelihoodTable(occupancy)
         self._matcher = CorrelativeScanMatcher(

@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Iterable
+from dataclasses import replace
 
 import mujoco
 import numpy as np
@@ -308,3 +309,25 @@ def _rasterise(polygon: np.ndarray, occupied: np.ndarray, x0: float, y0: float, 
             centre + half > projected.min() + _EPS
         )
     occupied[r0:r1, c0:c1] |= overlap
+
+
+FLAT = 0.05  # m: furniture no taller than this (a rug) is driven over
+
+
+def drive_map(world: World, occupancy: OccupancyMap) -> OccupancyMap:
+    """``occupancy`` (the laser's map) with every piece of furniture's whole floor outline
+    marked occupied: what the robot must plan its drives around.
+
+    The laser sees a table's legs at its height, not the top that overhangs them at 0.7 m, and
+    the robot's 1.2 m column would hit that top; so the planner keeps clear of each furniture
+    body's convex outline over all its geoms (``World.footprint``), whatever their height. The
+    localizer keeps the laser's own map."""
+    cells = np.array(occupancy.occupancy, dtype=float, copy=True)
+    blocked = np.zeros(occupancy.shape, dtype=bool)
+    x0, y0 = occupancy.origin[0], occupancy.origin[1]
+    for name in world.furniture():
+        outline = world.footprint(name)
+        if outline.top > FLAT:
+            _rasterise(outline.polygon, blocked, x0, y0, occupancy.resolution)
+    cells[blocked] = 1.0
+    return replace(occupancy, occupancy=cells)
