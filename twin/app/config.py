@@ -125,6 +125,42 @@ class ConfidenceOptions:
     )
 
 
+PLANNERS = ("information", "detection", "coverage", "random", "survey")
+
+
+@dataclass(frozen=True)
+class SearchOptions:
+    """``[search]``: how ``twin search`` chooses its views and when it stops
+    (``twin.app.search``)."""
+
+    planner: Literal["information", "detection", "coverage", "random", "survey"] = option(
+        "information",
+        doc='"information": the view of most expected information per second; "detection": of '
+        'the highest probability of detecting the object per second (Ye & Tsotsos); "coverage":'
+        ' of the most cells seen least; "random": any reachable view; "survey": the mission\'s '
+        "fixed plan",
+    )
+    confidence: float = option(
+        0.95, low=0.5, high=1.0, doc="stop when every sought object's confidence reaches this"
+    )
+    absent: float = option(
+        0.95, low=0.5, high=1.0, doc="declare an object absent when P(absent) reaches this"
+    )
+    max_views: int = option(40, low=1, high=10000, doc="stop after this many views")
+    max_time_s: float = option(
+        900.0, unit="s", low=1.0, high=86400.0, doc="stop once the robot's clock passes this"
+    )
+    spacing_m: float = option(
+        0.4, unit="m", low=0.1, high=5.0, doc="views are taken from a lattice of this spacing"
+    )
+    headings: int = option(8, low=4, high=64, doc="directions a view may face at each place")
+    view_time_s: float = option(
+        1.5, unit="s", low=0.0, high=600.0,
+        doc="what a view costs besides moving (capture, settling): keeps cheap views honest",
+    )  # fmt: skip
+    seed: int = option(0, low=0, doc='seed of the "random" planner')
+
+
 @dataclass(frozen=True)
 class ObjectConfig:
     """An object to find: its RFCH model file, or ``None`` to train one from the scene."""
@@ -182,6 +218,7 @@ class SurveyConfig:
     map_file: Path | None = None  # the localization map's YAML (None: cut from the scene)
     visibility: VisibilityOptions = field(default_factory=VisibilityOptions)
     confidence: ConfidenceOptions = field(default_factory=ConfidenceOptions)
+    search: SearchOptions = field(default_factory=SearchOptions)
 
     @property
     def uses_sim_world(self) -> bool:
@@ -438,6 +475,7 @@ def parse_config(
             'rendered at the robot\'s pose), "map" or "auto"',
         )
     confidence = _typed(root, "confidence", ConfidenceOptions)
+    search = _typed(root, "search", SearchOptions)
     root.finish()
     return SurveyConfig(
         source,
@@ -456,6 +494,7 @@ def parse_config(
         map_file,
         visibility,
         confidence,
+        search,
     )
 
 

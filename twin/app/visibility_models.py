@@ -161,3 +161,22 @@ def build_visibility(
         options.object_height_m,
         default_reach(extent, config.grid.max_range),
     )
+
+
+def planning_visibility(
+    config: SurveyConfig, world: World, camera: CameraModel, occupancy: object | None = None
+) -> DepthVisibility | None:
+    """The visibility model for views not taken yet: the frame's own depth exists only once a
+    view is taken, so where the config reads it (``depth``, or ``auto`` with the twin's camera)
+    a planner renders the room's model instead; ``map`` and ``none`` stay as they are."""
+    from dataclasses import replace
+
+    source = config.visibility.source
+    if source in ("auto", "depth"):
+        source = "model"
+    return build_visibility(
+        replace(config, visibility=replace(config.visibility, source=source)),
+        world,
+        camera,
+        occupancy,
+    )

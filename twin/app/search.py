@@ -1,0 +1,557 @@
+"""Search, don't survey: after every view, choose the next one, and stop once sure.
+
+The paper's survey (``twin.app.survey``) flies a fixed plan. A search asks, before each view,
+which of the candidate views (``twin.app.candidates``: places on the free floor x headings) is
+worth most per second of robot time, and takes it with ``Mission.observe`` like any other view.
+What a view is worth is ``twin.core.view_gain``'s, over the mission's calibrated belief (the
+posterior of ``twin.core.confidence``); what it costs is the robot's time to get there: the
+drive along the planning map's shortest path (one Dijkstra search prices every place), the
+turns, the localizer settling after a leg, the head's pan, plus ``view_time_s`` for the view
+itself (Ye & Tsotsos 1999: detection probability per unit cost, greedily, one view ahead).
+
+Planners (``search.planner``):
+
+* ``information``: expected information (nats) about each sought object's cell, per second;
+* ``detection``: probability of detecting a sought object, per second (Ye & Tsotsos);
+* ``coverage``: the cells seen least so far (each weighed by exp(-views seen)), per second;
+* ``random``: any reachable view not taken yet, uniformly (seeded per view: resumable);
+* ``survey``: the mission's fixed plan, in order (the paper's).
+
+Every planner stops the same way: when every sought object's ``confidence`` reaches
+``search.confidence`` (found) or its P(absent) reaches ``search.absent`` (declared absent), when
+``max_views`` or ``max_time_s`` (robot clock) runs out, or when it has no view left. A view
+already taken (same place and heading) is not taken again: the same frame would be no new
+evidence, though the belief would count it as such. A planner's state is the mission's (its
+grid, belief and view log), so a resumed search continues where it stopped.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from typing import Any, Protocol
+
+import numpy as np
+
+from twin.app.candidates import Candidates, DetectionRates
+from twin.app.mission import Mission
+from twin.core.confidence import posterior
+from twin.core.devices import BaseLimits, PanTiltLimits
+from twin.core.errors import InputError
+from twin.core.geometry import Pose2D, wrap_angle
+from twin.core.view_gain import (
+    Footprints,
+    detection_probability,
+    information_gain,
+    unseen_coverage,
+)
+
+PAN_MARGIN = math.radians(5.0)  # stay clear of the head's end stops (as the survey does)
+SAME_PLACE = 0.15  # metres: a candidate this close to the robot is reached without driving
+TAKEN_M, TAKEN_RAD = 0.15, math.radians(10.0)  # a logged view this close is that candidate
+
+
+@dataclass(frozen=True)
+class TimeModel:
+    """Seconds of robot time to get from one view to another (a planner's estimate).
+
+    Drives and turns follow a trapezoidal speed profile with the base's limits; every leg ends
+    with the localizer weighing scans at rest (``leg_overhead``: measured on the twin, see
+    ``benchmarks/search_generality.py``); the head pans at its top speed.
+    """
+
+    base: BaseLimits
+    head: PanTiltLimits
+    leg_overhead: float = 1.0  # s: localizing at rest after a leg
+
+    @property
+    def pan_reach(self) -> float:
+        return max(0.0, min(self.head.pan_max, -self.head.pan_min) - PAN_MARGIN)
+
+    @staticmethod
+    def _profile(amount: np.ndarray, speed: float, accel: float) -> np.ndarray:
+        amount = np.abs(amount)
+        ramp = speed * speed / accel  # the distance spent reaching full speed and stopping
+        return np.where(
+            amount < ramp, 2.0 * np.sqrt(amount / accel), amount / speed + speed / accel
+        )
+
+    def drive(self, metres: np.ndarray) -> np.ndarray:
+        return self._profile(np.asarray(metres, float), self.base.speed, self.base.accel)
+
+    def turn(self, radians: np.ndarray) -> np.ndarray:
+        return self._profile(np.asarray(radians, float), self.base.turn_rate, self.base.turn_accel)
+
+    def pan(self, radians: np.ndarray) -> np.ndarray:
+        return np.abs(np.asarray(radians, float)) / self.head.pan_speed
+
+
+@dataclass(frozen=True)
+class Moves:
+    """For every candidate view: the seconds to reach it, and the base yaw and head pan it is
+    taken with (inf seconds: unreachable)."""
+
+    seconds: np.ndarray
+    base_yaw: np.ndarray
+    pan: np.ndarray
+    metres: np.ndarray  # along the planning map's shortest path to the view's place
+
+
+def moves(
+    candidates: Candidates,
+    here: Pose2D,
+    pan_now: float,
+    place_metres: np.ndarray,
+    timing: TimeModel,
+) -> Moves:
+    """Price every candidate from the robot's pose ``here`` and head pan ``pan_now``, given the
+    shortest-path metres to every place (``place_metres``, (P,), inf: unreachable).
+
+    At the robot's own place (within ``SAME_PLACE``) a heading within the head's reach is only a
+    pan; beyond it the base turns the least that brings it within reach. Elsewhere the base
+    drives there and faces the heading with the head straight."""
+    headings = candidates.headings
+    n_h = len(headings)
+    places = candidates.places
+    metres = np.repeat(place_metres, n_h)
+    heading = np.tile(headings, len(places))
+    direct = np.repeat(np.hypot(places[:, 0] - here.x, places[:, 1] - here.y), n_h)
+    here_place = direct < SAME_PLACE
+    reach = timing.pan_reach
+    # Driving: turn to the first leg (taken as the straight bearing), drive, turn to the heading.
+    bearing = np.arctan2(
+        np.repeat(places[:, 1], n_h) - here.y, np.repeat(places[:, 0], n_h) - here.x
+    )
+    drive = (
+        timing.turn(wrap_angle(bearing - here.yaw))
+        + timing.drive(metres)
+        + timing.turn(wrap_angle(heading - bearing))
+        + timing.leg_overhead
+        + timing.pan(pan_now)
+    )
+    # Staying: pan within reach, or turn the least and pan to the reach's edge.
+    wanted = wrap_angle(heading - here.yaw)
+    pan_here = np.clip(wanted, -reach, reach)
+    turn = wrap_angle(wanted - pan_here)
+    stay = timing.pan(pan_here - pan_now) + np.where(
+        np.abs(turn) > 1e-9, timing.turn(turn) + timing.leg_overhead, 0.0
+    )
+    seconds = np.where(here_place, stay, drive)
+    seconds = np.where(np.isfinite(metres) | here_place, seconds, np.inf)
+    base_yaw = np.where(here_place, wrap_angle(here.yaw + turn), heading)
+    pan = np.where(here_place, pan_here, 0.0)
+    return Moves(seconds, base_yaw, pan, np.where(here_place, 0.0, metres))
+
+
+@dataclass(frozen=True)
+class ViewChoice:
+    """The view a planner chose (a ``twin.app.mission.ViewTarget``) and why: ``why`` in words,
+    ``scores`` every candidate's score at the time (NaN: not eligible), for the viewer."""
+
+    index: int  # the candidate view (-1: a view of a fixed plan)
+    stop: int  # the places visited so far, this one included
+    base: Pose2D
+    pan: float
+    tilt: float
+    why: str
+    scores: np.ndarray | None = None
+    gain: float = math.nan
+    seconds: float = math.nan
+
+
+@dataclass
+class Situation:
+    """What a planner knows before a view: where the robot is, what every candidate costs, which
+    were taken, the posterior of each object still sought and the grid's seen counts."""
+
+    views_done: int
+    here: Pose2D
+    moves: Moves
+    taken: np.ndarray  # (n_views,) bool
+    places_visited: int
+    posteriors: dict[str, np.ndarray] = field(default_factory=dict)  # sought objects only
+    observed: np.ndarray | None = None  # (ny, nx) views' seen share per cell, summed
+
+
+class Planner(Protocol):
+    name: str
+
+    def choose(self, situation: Situation) -> ViewChoice | None:
+        """The next view, or None when this planner has none left."""
+        ...
+
+
+class GainPlanner:
+    """The candidate of the most expected gain per second (``information``, ``detection`` or
+    ``coverage``)."""
+
+    def __init__(
+        self,
+        name: str,
+        candidates: Candidates,
+        footprints: dict[str, Footprints],
+        rates: dict[str, DetectionRates],
+        view_time: float,
+        tilt: float = 0.0,
+    ) -> None:
+        if name not in ("information", "detection", "coverage"):
+            raise InputError(f"unknown gain planner {name!r}")
+        self.name, self.candidates, self.footprints = name, candidates, footprints
+        self.rates, self.view_time, self.tilt = rates, view_time, tilt
+        self._shares = next(iter(footprints.values())) if footprints else None
+
+    def gains(self, situation: Situation) -> np.ndarray:
+        """(n_views,) the expected gain of every candidate (nats, probability, or cells)."""
+        if self.name == "coverage":
+            if situation.observed is None or self._shares is None:
+                raise InputError("the coverage planner needs the grid's seen counts")
+            return unseen_coverage(self._shares, situation.observed)
+        total = np.zeros(self.candidates.n_views)
+        for name, cells in situation.posteriors.items():
+            prints, rates = self.footprints[name], self.rates[name]
+            if self.name == "information":
+                total += information_gain(prints, cells, rates.fpr)
+            else:
+                total += detection_probability(prints, cells, rates.contrast)
+        return total
+
+    def choose(self, situation: Situation) -> ViewChoice | None:
+        gains = self.gains(situation)
+        seconds = situation.moves.seconds + self.view_time
+        eligible = np.isfinite(seconds) & ~situation.taken
+        if not eligible.any():
+            return None
+        scores = np.where(eligible, gains / seconds, np.nan)
+        order = np.argsort(np.where(eligible, -scores, np.inf), kind="stable")
+        best = int(order[0])
+        unit = {"information": "nats", "detection": "P(detect)", "coverage": "cells unseen"}
+        why = (
+            f"{self.name}: {gains[best]:.3f} {unit[self.name]} expected for "
+            f"{seconds[best]:.1f} s ({situation.moves.metres[best]:.2f} m to drive), "
+            f"{scores[best]:.4f}/s, best of {int(eligible.sum())} views"
+        )
+        if eligible.sum() > 1:
+            second = int(order[1])
+            why += (
+                f"; next best {scores[second]:.4f}/s "
+                f"({gains[second]:.3f} in {seconds[second]:.1f} s)"
+            )
+        return _choice(self.candidates, situation, best, why, self.tilt, scores, gains[best])
+
+
+class RandomPlanner:
+    """Any reachable view not taken yet, uniformly; view k's draw is seeded by (seed, k), so a
+    resumed search draws what the uninterrupted one would have."""
+
+    name = "random"
+
+    def __init__(self, candidates: Candidates, seed: int, tilt: float = 0.0) -> None:
+        self.candidates, self.seed, self.tilt = candidates, seed, tilt
+
+    def choose(self, situation: Situation) -> ViewChoice | None:
+        eligible = np.flatnonzero(np.isfinite(situation.moves.seconds) & ~situation.taken)
+        if len(eligible) == 0:
+            return None
+        rng = np.random.default_rng([self.seed, situation.views_done])
+        best = int(rng.choice(eligible))
+        why = f"random: one of {len(eligible)} reachable views not taken yet"
+        return _choice(self.candidates, situation, best, why, self.tilt)
+
+
+class PlanPlanner:
+    """The mission's fixed plan (``twin.app.survey.plan_views``), view by view."""
+
+    name = "survey"
+
+    def __init__(self, plan: Sequence[Any]) -> None:
+        self.plan = list(plan)
+
+    def choose(self, situation: Situation) -> ViewChoice | None:
+        if situation.views_done >= len(self.plan):
+            return None
+        view = self.plan[situation.views_done]
+        why = (
+            f"survey: view {view.index + 1} of {len(self.plan)} of the fixed plan "
+            f"(stop {view.stop + 1})"
+        )
+        return ViewChoice(-1, view.stop, view.base, view.pan, view.tilt, why)
+
+
+def _choice(
+    candidates: Candidates,
+    situation: Situation,
+    view: int,
+    why: str,
+    tilt: float,
+    scores: np.ndarray | None = None,
+    gain: float = math.nan,
+) -> ViewChoice:
+    place = candidates.places[candidates.place_of(view)]
+    m = situation.moves
+    moving = m.metres[view] > 0.0
+    if moving:
+        base = Pose2D(float(place[0]), float(place[1]), float(m.base_yaw[view]))
+    else:  # turn (or not) where the robot stands: no drive of a few centimetres to the lattice
+        base = Pose2D(situation.here.x, situation.here.y, float(m.base_yaw[view]))
+    stop = situation.places_visited + (1 if moving or situation.places_visited == 0 else 0)
+    return ViewChoice(
+        view, stop - 1, base, float(m.pan[view]), tilt, why, scores, gain, float(m.seconds[view])
+    )
+
+
+# -- the loop ------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class StopRule:
+    """When a search ends (``search.*`` of the config)."""
+
+    confidence: float = 0.95
+    absent: float = 0.95
+    max_views: int = 40
+    max_time: float = 900.0
+
+
+def verdicts(mission: Mission, rule: StopRule) -> dict[str, str]:
+    """Per object: "found" (confidence reached), "absent" (P(absent) reached) or "sought"."""
+    details = mission.confidence_details()
+    out = {}
+    for name in mission.grid.objects:
+        if name not in details:
+            out[name] = "sought"
+            continue
+        confidence, p_absent = details[name]
+        out[name] = (
+            "found" if confidence >= rule.confidence
+            else "absent" if p_absent >= rule.absent
+            else "sought"
+        )  # fmt: skip
+    return out
+
+
+def stop_reason(mission: Mission, rule: StopRule) -> str | None:
+    """Why the search should stop now, or None to go on."""
+    states = verdicts(mission, rule)
+    if mission.views_done > 0 and all(s != "sought" for s in states.values()):
+        found = [n for n, s in states.items() if s == "found"]
+        absent = [n for n, s in states.items() if s == "absent"]
+        parts = []
+        if found:
+            parts.append(f"found {', '.join(found)} (confidence >= {rule.confidence:g})")
+        if absent:
+            parts.append(f"declared {', '.join(absent)} absent (P >= {rule.absent:g})")
+        return "; ".join(parts)
+    if mission.views_done >= rule.max_views:
+        return f"view budget spent ({rule.max_views} views)"
+    if mission.state.robot_time >= rule.max_time:
+        return f"time budget spent ({rule.max_time:g} s of robot time)"
+    return None
+
+
+class PlaceDistances:
+    """Metres along the planning map's shortest path from a pose to every candidate place (one
+    Dijkstra search, ``PathPlanner.distances_from``); inf where the robot cannot go."""
+
+    def __init__(self, planner: Any, places: np.ndarray) -> None:
+        self.planner = planner
+        rows, cols = planner.map.cell_of(places[:, 0], places[:, 1])
+        ny, nx = planner.map.shape
+        inside = (rows >= 0) & (rows < ny) & (cols >= 0) & (cols < nx)
+        self._rows, self._cols = np.clip(rows, 0, ny - 1), np.clip(cols, 0, nx - 1)
+        self._inside = inside
+
+    def __call__(self, here: Pose2D) -> np.ndarray:
+        field_m = self.planner.distances_from((here.x, here.y))
+        return np.where(self._inside, field_m[self._rows, self._cols], np.inf)
+
+
+class Searcher:
+    """Runs a search on a ``Mission``: situation, choice, view, until a stop reason."""
+
+    def __init__(
+        self,
+        mission: Mission,
+        planner: Planner,
+        candidates: Candidates,
+        place_metres: Callable[[Pose2D], np.ndarray],
+        timing: TimeModel,
+        rule: StopRule,
+        temperature: float,
+        p_absent: float,
+    ) -> None:
+        self.mission, self.planner, self.candidates = mission, planner, candidates
+        self.place_metres, self.timing, self.rule = place_metres, timing, rule
+        self.temperature, self.p_absent = temperature, p_absent
+
+    def situation(self) -> Situation:
+        mission, cand = self.mission, self.candidates
+        robot = mission.robot
+        here = robot.base.pose()
+        pan_now = float(robot.pantilt.position()[0])
+        place_metres = self.place_metres(here)
+        taken = np.zeros(cand.n_views, dtype=bool)
+        visited: list[tuple[float, float]] = []
+        for logged in mission.views.views:
+            ox, oy = logged.origin
+            axis = float(np.mean(logged.wedges))
+            view, metres, radians = cand.nearest(ox, oy, axis)
+            if metres <= TAKEN_M and radians <= TAKEN_RAD:
+                taken[view] = True
+            if not visited or math.hypot(ox - visited[-1][0], oy - visited[-1][1]) > SAME_PLACE:
+                visited.append((ox, oy))
+        posteriors = {}
+        belief = mission.belief
+        states = verdicts(mission, self.rule)
+        if belief is not None:
+            for name in mission.grid.objects:
+                if states[name] == "sought":
+                    cells, _ = posterior(belief.layer(name), self.temperature, self.p_absent)
+                    posteriors[name] = cells
+        grid = mission.grid
+        observed = sum(grid.observed(n) for n in grid.objects) / len(grid.objects)
+        return Situation(
+            mission.views_done,
+            here,
+            moves(cand, here, pan_now, place_metres, self.timing),
+            taken,
+            len(visited),
+            posteriors,
+            observed,
+        )
+
+    def run(self, on_view: Callable[[ViewChoice], None] | None = None) -> str:
+        """Take views until a stop reason; returns it."""
+        while True:
+            reason = stop_reason(self.mission, self.rule)
+            if reason is not None:
+                return reason
+            choice = self.planner.choose(self.situation())
+            if choice is None:
+                return f"no view left to take ({self.planner.name})"
+            if on_view is not None:
+                on_view(choice)
+            self.mission.observe(choice)
+
+
+# -- wiring ---------------------------------------------------------------------------------------
+
+
+def search_candidates(config: Any, world: Any, camera: Any, planner_map: Any, spans: np.ndarray,
+                      say: Callable[[str], None] = lambda _: None) -> Candidates:  # fmt: skip
+    """The config's candidate views on ``planner_map`` (a ``PathPlanner``), from the cache in
+    ``run.cache`` or built (and cached) now."""
+    from twin.app.candidates import (
+        build_candidates,
+        candidates_key,
+        lattice_places,
+        load_candidates,
+        save_candidates,
+    )
+    from twin.app.visibility_models import default_reach, planning_visibility
+
+    options, spec = config.search, config.grid.spec
+    occupancy = planner_map.map
+    places = lattice_places(
+        planner_map.blocked, occupancy.origin[:2], occupancy.resolution, options.spacing_m
+    )
+    reach = default_reach((spec.x_min, spec.y_min, spec.x_max, spec.y_max), config.grid.max_range)
+    key = candidates_key(
+        config.scene,
+        places=places,
+        headings=options.headings,
+        spec=[spec.x_min, spec.y_min, spec.x_max, spec.y_max, spec.cell_size],
+        camera=[camera.width, camera.height, camera.hfov],
+        spans=np.asarray(spans),
+        visibility=[config.visibility.source, config.visibility.supports,
+                    config.visibility.object_height_m],
+        tilt=config.mission.tilt,
+        reach=reach,
+    )  # fmt: skip
+    path = config.cache / "search" / f"candidates-{key}.npz"
+    cached = load_candidates(path, key)
+    if cached is not None:
+        return cached
+    say(f"pricing {len(places) * options.headings} candidate views (cached for next time)")
+    visibility = planning_visibility(config, world, camera, occupancy)
+    candidates = build_candidates(
+        places, options.headings, spec, camera, spans, visibility, reach, config.mission.tilt
+    )
+    save_candidates(path, candidates, key)
+    return candidates
+
+
+def make_searcher(
+    config: Any,
+    mission: Mission,
+    world: Any,
+    plan: Sequence[Any],
+    say: Callable[[str], None] = lambda _: None,
+) -> Searcher:
+    """The search ``config`` describes, on ``mission`` (its robot's base must plan on a map:
+    ``pose_source = "laser"``). ``plan`` is the mission's fixed plan (the ``survey`` planner)."""
+    from twin.app.candidates import detection_rates
+
+    robot, options = mission.robot, config.search
+    planner_map = getattr(robot.base, "planner", None)
+    if planner_map is None:
+        raise InputError(
+            "twin search plans its drives on the localization map: set robot.base.pose_source "
+            '= "laser" (with a [localization] map)'
+        )
+    needs_belief = options.planner in ("information", "detection")
+    models = {m.name: m for m in mission.detector.models}
+    missing = [name for name, m in models.items() if m.calibration is None]
+    if needs_belief and (missing or mission.belief is None):
+        raise InputError(
+            f'search.planner = "{options.planner}" weighs views by the detector\'s calibrated '
+            f"belief, and {missing[0] if missing else 'the mission'!r} has no calibration: store "
+            "one with 'twin roc --store', or choose search.planner = \"coverage\""
+        )
+    spans = mission.detector.column_spans(robot.camera.model.width)
+    candidates = search_candidates(config, world, robot.camera.model, planner_map, spans, say)
+    rates = {name: detection_rates(m.calibration) for name, m in models.items() if m.calibration}
+    footprints = {name: candidates.for_detector(r) for name, r in rates.items()}
+    if not footprints:
+        footprints = {"": candidates.footprints}  # coverage and random need the shares only
+    tilt = config.mission.tilt
+    if options.planner == "random":
+        planner: Planner = RandomPlanner(candidates, options.seed, tilt)
+    elif options.planner == "survey":
+        planner = PlanPlanner(plan)
+    else:
+        planner = GainPlanner(
+            options.planner, candidates, footprints, rates, options.view_time_s, tilt
+        )
+    inner = getattr(robot.base, "inner", robot.base)  # a localized base wraps the device
+    timing = TimeModel(getattr(inner, "limits", BaseLimits()), robot.pantilt.limits)
+    rule = StopRule(options.confidence, options.absent, options.max_views, options.max_time_s)
+    return Searcher(
+        mission,
+        planner,
+        candidates,
+        PlaceDistances(planner_map, candidates.places),
+        timing,
+        rule,
+        config.confidence.temperature,
+        config.confidence.p_absent,
+    )
+
+
+def path_length(planner_map: Any, path: Sequence[Sequence[float]]) -> float:
+    """Metres driven between the views of ``path`` ((x, y, yaw) each), along the planning map's
+    shortest paths (straight where a leg cannot be planned: a pose a hair inside the margin)."""
+    from twin.nav.planner import NoPathError
+
+    total = 0.0
+    for a, b in itertools.pairwise(path):
+        straight = math.hypot(b[0] - a[0], b[1] - a[1])
+        if straight < SAME_PLACE:
+            total += straight
+            continue
+        try:
+            total += planner_map.plan(a[:2], b[:2]).length
+        except (InputError, NoPathError):
+            total += straight
+    return total
