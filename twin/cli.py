@@ -24,6 +24,7 @@ COMMAND_MODULES: tuple[str, ...] = (
     "twin.commands.rfch",
     "twin.commands.sim",
     "twin.commands.survey",
+    "twin.commands.search",
     "twin.commands.hw",
     "twin.commands.serve_hardware",
     "twin.commands.batch_survey",

@@ -70,6 +70,7 @@ class SceneInfo:
     truth: dict[str, tuple[float, float, float]] = field(default_factory=dict)
     peak_separation: float = 0.0
     occupancy: OccupancyMap | None = None  # the map the robot localizes against, if any
+    planner: str | None = None  # a search's planner (twin search): the viewer says why it chose
 
 
 @dataclass(frozen=True)
@@ -126,6 +127,11 @@ class Recorder(Protocol):
 
     def log_view(self, record: ViewRecord, grid: AccumulatorGrid) -> None: ...
 
+    def log_choice(self, index: int, choice: Any, candidates: Any) -> None:
+        """Before view ``index`` of a search: why the planner chose it (``ViewChoice``) among the
+        ``Candidates``."""
+        ...
+
     def flush(self) -> None:
         """Put everything logged so far on disk (or on the wire) before the mission checkpoints,
         so that what the grid checkpoint holds, the recording holds."""
@@ -147,6 +153,9 @@ class NullRecorder:
         pass
 
     def log_view(self, record: ViewRecord, grid: AccumulatorGrid) -> None:
+        pass
+
+    def log_choice(self, index: int, choice: Any, candidates: Any) -> None:
         pass
 
     def flush(self) -> None:
@@ -526,6 +535,42 @@ class RerunRecorder:
         for name, confidence in record.confidence.items():
             log(f"plots/confidence/{name}", rr.Scalars(confidence))
 
+    def log_choice(self, index: int, choice: Any, candidates: Any) -> None:
+        """Why view ``index`` was chosen: the planner's words in the "why this view" log, every
+        place's best score (heat colours, brighter: worth more per second) and the chosen view
+        as an arrow, in the top-down panel at the view's time."""
+        rr, log = self._rr, self.stream.log
+        self.stream.set_time("view", sequence=index)
+        log("plan/why", rr.TextLog(f"view {index + 1}: {choice.why}", level="INFO"))
+        if choice.scores is not None:
+            per_place = np.asarray(choice.scores, float).reshape(len(candidates.places), -1)
+            best = np.nanmax(np.where(np.isnan(per_place), -np.inf, per_place), axis=1)
+            shown = np.isfinite(best)
+            top = float(best[shown].max()) if shown.any() else 0.0
+            unit = np.clip(best[shown] / top, 0.0, 1.0) if top > 0 else np.zeros(shown.sum())
+            log(
+                f"{MAP}/plan/options",
+                rr.Points2D(
+                    candidates.places[shown],
+                    radii=0.05,
+                    colors=heat_colors(unit, alpha=200),
+                    draw_order=25.0,
+                ),
+            )
+        heading = choice.base.yaw + choice.pan
+        log(
+            f"{MAP}/plan/next",
+            rr.Arrows2D(
+                origins=[[choice.base.x, choice.base.y]],
+                vectors=[[0.6 * math.cos(heading), 0.6 * math.sin(heading)]],
+                radii=0.035,
+                colors=[255, 255, 255],
+                labels=["next view"],
+                show_labels=False,
+                draw_order=31.0,
+            ),
+        )
+
     def flush(self) -> None:
         """Block until every view logged so far is in the file (and fsync'd), or sent to the
         viewer; a viewer that takes nothing for ``VIEWER_FLUSH_TIMEOUT`` is left behind with one
@@ -616,7 +661,7 @@ class RerunRecorder:
             rrb.Spatial2DView(name="camera and patch scores", origin="world/robot/camera"),
             rrb.Spatial2DView(name="depth (visibility)", origin="depth"),
         )
-        plots = rrb.Horizontal(
+        series = [
             rrb.TimeSeriesView(name="peak value", origin="plots/peak"),
             rrb.TimeSeriesView(name="first / second peak", origin="plots/peak_ratio"),
             rrb.TimeSeriesView(
@@ -624,7 +669,12 @@ class RerunRecorder:
                 origin="plots/confidence",
                 axis_y=rrb.ScalarAxis(range=(0.0, 1.0)),
             ),
-        )
+        ]
+        if scene.planner is not None:  # a search says why it chose each view
+            why = rrb.TextLogView(name=f"why this view ({scene.planner})", origin="plan")
+            plots = rrb.Horizontal(why, *series, column_shares=[3, 1, 1, 1])
+        else:
+            plots = rrb.Horizontal(*series)
         left = maps[0] if len(maps) == 1 else rrb.Tabs(*maps)
         return rrb.Blueprint(
             rrb.Horizontal(

@@ -46,6 +46,7 @@ RUN_CONFIG = "config.toml"
 RUN_OPTIONS = "run.json"
 RUN_KIND = "twin-survey-run"
 PLACEMENTS = ("config", "random")
+MISSIONS = ("survey", "search")  # the fixed plan (twin survey), or views chosen as it goes
 
 
 @dataclass(frozen=True)
@@ -60,6 +61,7 @@ class RunOptions:
     rerun_bind: str = "127.0.0.1"
     recording_id: str = field(default_factory=lambda: str(uuid.uuid4()))
     overrides: tuple[str, ...] = ()  # the --set KEY=VALUE it started with (already in config.toml)
+    mission: str = "survey"  # "search": twin search (twin.app.search)
 
     def to_json(self) -> str:
         return json.dumps({"kind": RUN_KIND, **asdict(self)}, indent=1)
@@ -84,6 +86,7 @@ class RunOptions:
         ok = ok and data.get("place_target") in PLACEMENTS and data.get("rerun") in RERUN_MODES
         overrides = data.get("overrides", []) if isinstance(data, dict) else None
         ok = ok and isinstance(overrides, list) and all(isinstance(o, str) for o in overrides)
+        ok = ok and isinstance(data, dict) and data.get("mission", "survey") in MISSIONS
         if not ok:
             raise InputError(
                 f"{path} is not the options of a twin survey run (wrong shape); start a new run"
@@ -97,6 +100,7 @@ class RunOptions:
             data["rerun_bind"],
             data["recording_id"],
             tuple(overrides),
+            data.get("mission", "survey"),
         )
 
 
@@ -121,13 +125,20 @@ def start_run(
     seed: int = 0,
     rerun: str | None = None,
     rerun_bind: str = "127.0.0.1",
+    mission: str = "survey",
 ) -> PreparedRun:
     """Check everything that can be checked, then claim the run's folder and write its config
-    and options. ``out`` None: a new time-stamped folder below the config's ``run.out``."""
+    and options. ``out`` None: a new time-stamped folder below the config's ``run.out``;
+    ``mission``: "survey" flies the fixed plan, "search" chooses its views (``twin search``)."""
     source = resolve_config(config_name)
     config = load_config(source, overrides=overrides)
     if place_target == "random" and not config.uses_sim_world:
         raise InputError("--place-target random works in the simulation only")
+    if mission == "search" and config.localization is None:
+        raise InputError(
+            "twin search plans its drives on the localization map: set robot.base.pose_source "
+            '= "laser" (with a [localization] map)'
+        )
     if out is None:
         stamp = datetime.now().strftime("%Y%m%d-%H%M%S")
         out = config.out / stamp
@@ -149,6 +160,7 @@ def start_run(
         rerun or config.rerun,
         rerun_bind,
         overrides=tuple(overrides),
+        mission=mission,
     )
     created = make_output_folder(out, flag)
     with removed_on_false_start(out, created, lambda: False):
@@ -266,25 +278,39 @@ def _fly(config, robot, context, run, resume, started, quiet, on_result) -> dict
         confidence_options=config.confidence,
         views=views,
     )
+    searcher = None
+    if options.mission == "search":
+        from twin.app.search import make_searcher
+
+        searcher = make_searcher(config, mission, world, plan, say)
+        scene = replace(scene, planner=config.search.planner)
+    total = config.search.max_views if searcher is not None else len(plan)
     setup_time = time.perf_counter() - setup_started
     n_stops = len(config.mission.stops)
     bar = tqdm(
-        total=len(plan),
+        total=total,
         initial=mission.views_done,
         unit="view",
-        desc="survey",
+        desc=options.mission,
         disable=quiet or not sys.stderr.isatty(),
     )
 
     def on_view(view) -> None:  # before each view: show the views done so far
         bar.update(mission.views_done - bar.n)
-        bar.set_description(f"stop {view.stop + 1}/{n_stops}")
+        if searcher is None:
+            bar.set_description(f"stop {view.stop + 1}/{n_stops}")
+        else:
+            bar.set_description(f"place {view.stop + 1}")
+            recorder.log_choice(mission.views_done, view, searcher.candidates)
 
-    status, stopped_by = "complete", None
+    status, stopped_by, stop_reason = "complete", None, None
     try:
-        recorder.begin(scene, grid, len(plan))
+        recorder.begin(scene, grid, total)
         with robot, bar:
-            run_survey(mission, plan, on_view)
+            if searcher is None:
+                run_survey(mission, plan, on_view)
+            else:
+                stop_reason = searcher.run(on_view)
             bar.update(mission.views_done - bar.n)
     except (KeyboardInterrupt, TwinError) as exc:
         stopped_by = exc
@@ -308,8 +334,10 @@ def _fly(config, robot, context, run, resume, started, quiet, on_result) -> dict
             views=views,
         )
     result = _write_results(
-        config, mission, scene, out, options, status, len(plan), setup_time, started
+        config, mission, scene, out, options, status, total, setup_time, started
     )
+    if searcher is not None:
+        result = _search_results(out, result, config, stop_reason)
     if stopped_by is not None:
         raise stopped_by
     if on_result is not None:
@@ -428,6 +456,29 @@ def _write_results(
             estimate=tuple(entry["estimate_m"]),
             truth=tuple(entry["truth_m"]) if "truth_m" in entry else None,
         )
+    planner_map = getattr(mission.robot.base, "planner", None)
+    if planner_map is not None:
+        from twin.app.search import path_length
+
+        result["path_length_m"] = round(path_length(planner_map, mission.state.path), 3)
+    result["time_s"] = result["robot_time_s"]
+    result["mission"] = options.mission
+    write_text_atomic(out / RESULT_FILE, json.dumps(json_safe(result), indent=1))
+    return result
+
+
+def _search_results(
+    out: Path, result: dict[str, Any], config: SurveyConfig, stop_reason: str | None
+) -> dict[str, Any]:
+    """A search's result adds its planner and why it stopped (None: it did not finish)."""
+    result = {
+        **result,
+        "search": {
+            "planner": config.search.planner,
+            "stopped": stop_reason,
+            "confidence_goal": config.search.confidence,
+        },
+    }
     write_text_atomic(out / RESULT_FILE, json.dumps(json_safe(result), indent=1))
     return result
 

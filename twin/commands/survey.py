@@ -23,6 +23,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "fuse the bearing wedges into the accumulator grid; write result.json, grid PNGs and a "
         "Rerun recording. Without --config, runs the shipped living-room mission in the twin.",
     )
+    add_run_arguments(parser)
+    parser.set_defaults(handler=run, mission="survey")
+
+
+def add_run_arguments(parser: argparse.ArgumentParser) -> None:
+    """The arguments of a mission run (``twin survey`` and ``twin search``)."""
     add_config_arguments(parser)
     parser.add_argument("--out", type=Path, help="output folder (default: a new one in run.out)")
     parser.add_argument("--resume", type=Path, metavar="DIR", help="continue the run in DIR")
@@ -44,7 +50,6 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="address the 'serve' mode listens on (default: localhost only)",
     )
     parser.add_argument("--quiet", action="store_true", help="no progress bar, no summary")
-    parser.set_defaults(handler=run)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -54,9 +59,10 @@ def run(args: argparse.Namespace) -> int:
     started = time.perf_counter()
     if args.resume is not None:
         if args.config is not None or args.out is not None or args.set:
+            also = ", --planner" if args.mission == "search" else ""
             raise InputError(
                 "--resume DIR continues a run with its own config and folder; "
-                "drop --config, --set and --out"
+                f"drop --config, --set{also} and --out"
             )
         prepared = resume_run(args.resume)
         if isinstance(prepared, dict):
@@ -74,6 +80,7 @@ def run(args: argparse.Namespace) -> int:
             args.seed,
             args.rerun,
             args.rerun_bind,
+            args.mission,
         )
     out = prepared.folder
     run_mission(
@@ -98,6 +105,13 @@ def print_summary(out: Path, result: dict) -> None:
             line += f", truth ({entry['truth_m'][0]:.2f}, {entry['truth_m'][1]:.2f}) m, "
             line += f"error {entry['error_m']:.2f} m"
         print(line)
+    if "search" in result:
+        search = result["search"]
+        print(
+            f"{search['planner']} search: {result['views']} views, "
+            f"{result.get('path_length_m', float('nan')):.1f} m driven, "
+            f"{result['time_s']:.0f} s of robot time; stopped: {search['stopped']}"
+        )
     timings = result["timings_s"]
     print("time (s): " + ", ".join(f"{k} {v:.1f}" for k, v in timings.items() if not math.isnan(v)))
     print(f"wrote {out}")
