@@ -238,7 +238,7 @@ class GainPlanner:
                 f"; next best {scores[second]:.4f}/s "
                 f"({gains[second]:.3f} in {seconds[second]:.1f} s)"
             )
-        return _choice(self.candidates, situation, best, why, self.tilt, scores, gains[best])
+        return view_choice(self.candidates, situation, best, why, self.tilt, scores, gains[best])
 
 
 class RandomPlanner:
@@ -257,7 +257,7 @@ class RandomPlanner:
         rng = np.random.default_rng([self.seed, situation.views_done])
         best = int(rng.choice(eligible))
         why = f"random: one of {len(eligible)} reachable views not taken yet"
-        return _choice(self.candidates, situation, best, why, self.tilt)
+        return view_choice(self.candidates, situation, best, why, self.tilt)
 
 
 class PlanPlanner:
@@ -279,7 +279,7 @@ class PlanPlanner:
         return ViewChoice(-1, view.stop, view.base, view.pan, view.tilt, why)
 
 
-def _choice(
+def view_choice(
     candidates: Candidates,
     situation: Situation,
     view: int,
@@ -288,6 +288,7 @@ def _choice(
     scores: np.ndarray | None = None,
     gain: float = math.nan,
 ) -> ViewChoice:
+    """Candidate ``view`` as the target to observe, moved to as ``situation.moves`` says."""
     place = candidates.places[candidates.place_of(view)]
     m = situation.moves
     moving = m.metres[view] > 0.0
