@@ -70,8 +70,11 @@ class BatchSpec:
     lighting: tuple[float, float] = DEFAULT_LIGHTING
     threshold: tuple[float, float] = DEFAULT_THRESHOLD
     tolerance: float = SUCCESS_RADIUS_M
+    mission: str = "survey"  # or "search": views chosen as it goes (the config's [search])
 
     def __post_init__(self) -> None:
+        if self.mission not in ("survey", "search"):
+            raise InputError(f"--mission must be survey or search, got {self.mission!r}")
         unknown = [v for v in self.vary if v not in VARY]
         if unknown:
             raise InputError(
@@ -113,6 +116,7 @@ class BatchSpec:
             "vary": sorted(self.vary),
             "lighting": list(self.lighting),
             "threshold": list(self.threshold),
+            **({"mission": self.mission} if self.mission != "survey" else {}),
         }
 
     def load(self):
@@ -175,6 +179,12 @@ class ThresholdedDetector:
     @property
     def names(self) -> list[str]:
         return self.detector.names
+
+    @property
+    def models(self) -> list:
+        """The detector's models: a search's planner reads their calibration (of the scores
+        before the cut: for choosing views an estimate is enough)."""
+        return self.detector.models
 
     def scores(self, image: np.ndarray) -> np.ndarray:
         scores = self.detector.scores(image)
@@ -254,6 +264,7 @@ def run_batch_mission(spec: BatchSpec, run: int) -> dict[str, Any]:
     """One randomized mission (the task a worker runs); returns its JSON-ready result."""
     from twin.app.mission import Mission
     from twin.app.run import make_grids
+    from twin.app.search import path_length
     from twin.app.survey import plan_views, run_survey
 
     started = time.perf_counter()
@@ -281,7 +292,15 @@ def run_batch_mission(spec: BatchSpec, run: int) -> dict[str, Any]:
         confidence_options=config.confidence,
     )
     setup = time.perf_counter() - started
-    run_survey(mission, plan_views(config.mission, world.robot.pantilt.limits))
+    plan = plan_views(config.mission, world.robot.pantilt.limits)
+    search: dict[str, Any] = {}
+    if spec.mission == "search":
+        from twin.app.search import make_searcher
+
+        stopped = make_searcher(config, mission, sim.world, plan).run()
+        search = {"search": {"planner": config.search.planner, "stopped": stopped}}
+    else:
+        run_survey(mission, plan)
     result = mission.result(config.grid.peak_separation)
     for name, surface in surfaces.items():
         result["objects"][name]["surface"] = surface
@@ -291,6 +310,9 @@ def run_batch_mission(spec: BatchSpec, run: int) -> dict[str, Any]:
         "threshold": draw.threshold,
         "objects": json_safe(result["objects"]),
         "views": result["views"],
+        "time_s": result["robot_time_s"],
+        "path_length_m": round(path_length(world.robot.base.planner, mission.state.path), 3),
+        **search,
         "timings_s": {
             "setup": round(setup, 3),
             **result["timings_s"],

@@ -22,7 +22,7 @@ from twin.core.store import write_text_atomic
 SUMMARY_COLUMNS = (
     "run", "success", "error_m", "truth_x", "truth_y", "estimate_x", "estimate_y", "surface",
     "lighting", "threshold", "peak", "peak_ratio", "views", "setup_s", "move_s", "capture_s",
-    "detect_s", "fuse_s", "mission_s", "reused_world",
+    "detect_s", "fuse_s", "mission_s", "reused_world", "time_s", "path_length_m", "stopped",
 )  # fmt: skip
 
 
@@ -51,6 +51,9 @@ def summary_rows(results: Sequence[dict[str, Any]], tolerance: float) -> list[di
             "setup_s": t["setup"], "move_s": t["move"], "capture_s": t["capture"],
             "detect_s": t["detect"], "fuse_s": t["fuse"], "mission_s": t["mission"],
             "reused_world": int(r["reused_world"]),
+            # robot time and metres driven (older journals have neither), why a search stopped
+            "time_s": r.get("time_s", ""), "path_length_m": r.get("path_length_m", ""),
+            "stopped": r.get("search", {}).get("stopped", ""),
         })  # fmt: skip
     return rows
 
@@ -88,10 +91,25 @@ def summarize(
             for k in timing_keys
         },
         "worlds_reused": int(sum(r["reused_world"] for r in rows)),
+        "mission": spec.mission,
+        "views": _spread([r["views"] for r in rows]),
     }
+    for key in ("time_s", "path_length_m"):
+        if all(r[key] != "" for r in rows):
+            summary[key] = _spread([r[key] for r in rows])
     if wall_s is not None:
         summary["wall_s"] = round(wall_s, 3)
     return summary
+
+
+def _spread(values: Sequence[float]) -> dict[str, float]:
+    """Median, 90th percentile and mean: what a search's views, time and path are read by."""
+    a = np.asarray(values, dtype=float)
+    return {
+        "median": float(np.median(a)),
+        "p90": float(np.percentile(a, 90)),
+        "mean": float(a.mean()),
+    }
 
 
 def write_summary(

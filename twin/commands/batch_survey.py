@@ -11,6 +11,7 @@ import sys
 import time
 from pathlib import Path
 
+from twin.app.config import PLANNERS
 from twin.commands._args import add_config_arguments, comma_list, numbers
 from twin.commands.montecarlo import add_executor_arguments
 
@@ -44,6 +45,15 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument(
         "--tolerance", type=float, default=0.3, help="success radius in metres (0.3)"
     )
+    parser.add_argument(
+        "--mission", choices=("survey", "search"), default="survey",
+        help="survey: the config's fixed plan (default); search: views chosen as it goes "
+        "(twin search), by the config's search.planner or --planner",
+    )  # fmt: skip
+    parser.add_argument(
+        "--planner", choices=PLANNERS,
+        help="with --mission search: how the next view is chosen (sets search.planner)",
+    )  # fmt: skip
     add_config_arguments(parser)
     parser.add_argument("--out", type=Path, default=DEFAULT_OUT, help=f"folder ({DEFAULT_OUT})")
     add_executor_arguments(parser)
@@ -64,9 +74,15 @@ def run(args: argparse.Namespace) -> int:
     started = time.perf_counter()
     if args.runs < 1:
         raise InputError(f"--runs must be at least 1, got {args.runs}")
+    overrides = tuple(args.set)
+    if args.planner is not None:
+        if args.mission != "search":
+            raise InputError("--planner chooses a search's views; add --mission search")
+        overrides += (f"search.planner={args.planner}",)
     spec = BatchSpec.from_config(
-        args.config, tuple(args.set), seed=args.seed, vary=tuple(dict.fromkeys(args.vary)),
+        args.config, overrides, seed=args.seed, vary=tuple(dict.fromkeys(args.vary)),
         lighting=args.lighting, threshold=args.threshold, tolerance=args.tolerance,
+        mission=args.mission,
     )  # fmt: skip
     check_output_folder(
         args.out, "--out", lambda p: (p / JOURNAL_NAME).is_file(), "a twin batch-survey"
