@@ -15,11 +15,6 @@ REDUCED = "mission.stops=[[1.1, 1.2], [2.5, 3.3], [2.7, 4.4]]"
 MISCALIBRATED = "robot.base.wheel_radius_error=[0.0, 0.01]"
 
 
-@pytest.fixture(scope="module")
-def model_cache(tmp_path_factory):
-    return tmp_path_factory.mktemp("rfch-cache")
-
-
 def survey(out: Path, cache: Path, *sets: str) -> dict:
     argv = ["survey", "--out", str(out), "--quiet"]
     for setting in (REDUCED, "run.rerun=off", f"run.cache={cache}", MISCALIBRATED, *sets):

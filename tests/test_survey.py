@@ -34,11 +34,6 @@ def survey_argv(out: Path, cache: Path, *sets: str, rerun: str = "off") -> list[
     return argv
 
 
-@pytest.fixture(scope="session")
-def model_cache(tmp_path_factory):
-    return tmp_path_factory.mktemp("rfch-cache")
-
-
 def read_result(out: Path) -> dict:
     return json.loads((out / "result.json").read_text())
 

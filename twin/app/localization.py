@@ -50,6 +50,9 @@ RECENTRE_MIN_YAW = math.radians(1.5)
 # obstacle outlines (mean log-likelihood above -1.1 with the table's sigma)
 MATCH_MIN_MEAN_LOG_LIKELIHOOD = -1.1
 BACK_OFF_M = 0.20  # how far the base backs away after touching something
+# A leg may start this far inside the planning margin: a goal at the margin's edge is reached
+# within the base's 5 cm, and the next leg must still be able to leave it.
+START_TOLERANCE = 0.10
 
 
 @dataclass(frozen=True)
@@ -274,7 +277,9 @@ class LaserLocalizedBase(Base):
         """The planned waypoints as poses: each faces along its next leg, the last the goal."""
         if math.hypot(goal.x - here.x, goal.y - here.y) < ARRIVED_M:
             return [goal]  # only a turn on the spot is left
-        points = self.planner.plan((here.x, here.y), (goal.x, goal.y)).waypoints[1:]
+        points = self.planner.plan((here.x, here.y), (goal.x, goal.y), START_TOLERANCE).waypoints[
+            1:
+        ]
         poses = []
         for k, (x, y) in enumerate(points):
             if k + 1 < len(points):

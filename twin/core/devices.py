@@ -37,6 +37,9 @@ class DeviceError(TwinError):
         self.device, self.asked, self.seen, self.remedy = device, asked, seen, remedy
         super().__init__(f"{device}: {asked}: {seen}; {remedy}")
 
+    def __reduce__(self):  # pickled whole: a worker process's device error reaches the caller
+        return (type(self), (self.device, self.asked, self.seen, self.remedy))
+
 
 class NotConnectedError(DeviceError):
     """The device was used before ``connect()`` or after ``close()``."""

@@ -353,6 +353,22 @@ class PathPlanner:
             )
         return row, col
 
+    def _start_cell(self, point: tuple[float, float], tolerance: float) -> tuple[int, int]:
+        try:
+            return self._cell(point, "start")
+        except InputError:
+            if tolerance <= 0.0:
+                raise
+            rows, cols = np.nonzero(~self.blocked)
+            if rows.size == 0:
+                raise
+            cx, cy = self.map.center_of(rows, cols)
+            gaps = np.hypot(cx - point[0], cy - point[1])
+            k = int(np.argmin(gaps))
+            if gaps[k] > tolerance:
+                raise
+            return int(rows[k]), int(cols[k])
+
     def _nearest_free(self, x: float, y: float) -> str:
         rows, cols = np.nonzero(~self.blocked)
         if rows.size == 0:
@@ -369,12 +385,16 @@ class PathPlanner:
         res = self.map.resolution
         return (x - self.map.origin[0]) / res, (y - self.map.origin[1]) / res
 
-    def plan(self, start: Point, goal: Point) -> Path:
+    def plan(self, start: Point, goal: Point, start_tolerance: float = 0.0) -> Path:
         """The shortest grid path from ``start`` to ``goal`` (metres, or Pose2D), straightened
         into legs. ``InputError`` if either lies off the map or too near an obstacle,
-        ``NoPathError`` if no path of the robot's width joins them."""
+        ``NoPathError`` if no path of the robot's width joins them.
+
+        ``start_tolerance`` (m): a start this close to a free cell starts there (a robot that
+        ended its last leg a centimetre inside the margin, as localization leaves it, can leave
+        again); the path still begins at ``start``."""
         a, b = _xy(start, "start"), _xy(goal, "goal")
-        start_cell = self._cell(a, "start")
+        start_cell = self._start_cell(a, start_tolerance)
         goal_cell = self._cell(b, "goal")
         cells = astar(self.blocked, *start_cell, *goal_cell)
         if len(cells) == 0:

@@ -1,0 +1,253 @@
+"""Active search (twin.app.candidates, twin.app.search, twin search): candidates, costs,
+planners, stopping, and the command end to end."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+
+from twin.app.candidates import (
+    Candidates,
+    build_candidates,
+    candidates_key,
+    detection_rates,
+    disjoint_columns,
+    lattice_places,
+    load_candidates,
+    save_candidates,
+)
+from twin.app.search import (
+    GainPlanner,
+    Moves,
+    RandomPlanner,
+    Situation,
+    TimeModel,
+    moves,
+    path_length,
+)
+from twin.cli import main
+from twin.core.devices import VCC4_LIMITS, BaseLimits
+from twin.core.geometry import CameraModel, Pose2D
+from twin.core.grid import GridSpec
+from twin.rfch.calibration import ScoreCalibration
+
+CAMERA = CameraModel()  # 320 x 240, 45 degrees
+SPANS = np.array([[u, u + 32] for u in range(0, 289, 16)], dtype=float)  # the detector's
+SPEC = GridSpec(0.0, 0.0, 10.0, 10.0, 0.1)
+
+
+@pytest.fixture(scope="module")
+def open_floor() -> Candidates:
+    """Two places in an empty 10 m square, 8 headings, wedges reaching 2 m, all seen."""
+    places = np.array([[5.0, 5.0], [2.0, 5.0]])
+    return build_candidates(places, 8, SPEC, CAMERA, SPANS, None, reach=2.0)
+
+
+def test_only_columns_that_do_not_overlap_are_kept():
+    keep = disjoint_columns(SPANS)
+    spans = SPANS[keep]
+    assert len(keep) == 10 and spans[0, 0] == 0 and spans[-1, 1] == 320
+    assert np.all(spans[1:, 0] >= spans[:-1, 1])
+
+
+def test_a_views_footprint_is_its_wedge(open_floor):
+    """Every view of the open floor covers the wedge's area (45 degrees, 2 m: 1.57 m^2), each
+    cell at most once, and only cells within 2 m of its place."""
+    f = open_floor.footprints
+    per_view = np.bincount(f.row_view[np.repeat(np.arange(f.rows), np.diff(f.indptr))],
+                           weights=f.share, minlength=f.n_views)  # fmt: skip
+    wedge = math.pi * 2.0**2 * 45 / 360 / 0.1**2
+    assert np.allclose(per_view[:8], wedge, rtol=0.06)
+    assert np.all(open_floor.distance <= 2.0 + 0.08)
+    view = 3  # place 0 facing 135 degrees: its cells lie up and to the left
+    rows = np.flatnonzero(f.row_view == view)
+    cells = np.concatenate([f.cells[f.indptr[r] : f.indptr[r + 1]] for r in rows])
+    ys, xs = np.divmod(cells, SPEC.nx)
+    assert np.all(xs <= 50) and np.all(ys >= 50)
+    dense = np.zeros(SPEC.nx * SPEC.ny)
+    for r in rows:
+        np.add.at(
+            dense, f.cells[f.indptr[r] : f.indptr[r + 1]], f.share[f.indptr[r] : f.indptr[r + 1]]
+        )
+    assert dense.max() <= 1.0 + 1e-9
+
+
+def test_candidates_are_cached_by_key(tmp_path, open_floor):
+    path = tmp_path / "c.npz"
+    save_candidates(path, open_floor, "abc")
+    loaded = load_candidates(path, "abc")
+    assert loaded is not None and loaded.n_views == open_floor.n_views
+    assert np.allclose(loaded.footprints.share, open_floor.footprints.share, atol=1e-6)
+    assert load_candidates(path, "other") is None  # stale: rebuilt, never misused
+    path.write_bytes(b"not a cache")
+    assert load_candidates(path, "abc") is None
+    scene = tmp_path / "scene.xml"
+    scene.write_text("<mujoco/>")
+    assert candidates_key(scene, spacing=0.4) != candidates_key(scene, spacing=0.5)
+
+
+def test_the_lattice_keeps_only_places_the_robot_fits():
+    blocked = np.zeros((40, 40), dtype=bool)
+    blocked[:, 20:] = True
+    places = lattice_places(blocked, (0.0, 0.0), 0.05, 0.4)
+    assert len(places) == 2 * 5 and np.all(places[:, 0] < 1.0)  # 2 m square, left half free
+
+
+def test_detection_rates_take_the_best_threshold_and_each_bands_rate():
+    calibration = ScoreCalibration(
+        edges=(0.0, 0.25, 0.5, 0.75, 1.0),
+        on_counts=(5, 5, 40, 50),
+        off_counts=(500, 300, 20, 5),
+        ranges=(2.0,),
+        range_on_counts=((1, 1, 20, 30), (4, 4, 20, 20)),
+    )
+    rates = detection_rates(calibration)
+    assert rates.threshold == 0.5
+    assert rates.fpr == pytest.approx(25 / 825)
+    assert rates.tpr == pytest.approx((50 / 52, 40 / 48))
+    assert rates.tpr_at(np.array([1.0, 3.0])) == pytest.approx([50 / 52, 40 / 48])
+
+
+TIMING = TimeModel(BaseLimits(), VCC4_LIMITS, leg_overhead=1.0)
+
+
+def test_drive_and_turn_times_follow_the_speed_profile():
+    short, ramp, long = TIMING.drive(np.array([0.1, 0.5**2 / 0.6, 3.0]))
+    assert short == pytest.approx(2 * math.sqrt(0.1 / 0.6))
+    assert ramp == pytest.approx(
+        2 * math.sqrt(ramp * 0.6 / 0.6**2) * 0 + 0.5 / 0.6 * 2
+    )  # continuous
+    assert long == pytest.approx(3.0 / 0.5 + 0.5 / 0.6)
+    assert TIMING.pan(np.array([math.pi / 2]))[0] == pytest.approx(1.0)  # 90 deg/s
+
+
+def test_a_view_from_here_is_a_pan_within_reach_and_a_turn_beyond(open_floor):
+    here = Pose2D(5.0, 5.0, 0.0)
+    m = moves(open_floor, here, 0.0, np.array([0.0, 3.0]), TIMING)
+    # place 0 is here: heading 45 deg is a pan, 180 deg needs the base to turn 85 deg
+    assert m.metres[1] == 0 and m.pan[1] == pytest.approx(math.pi / 4)
+    assert m.seconds[1] == pytest.approx(TIMING.pan(np.array([math.pi / 4]))[0])
+    reach = TIMING.pan_reach
+    assert abs(m.pan[4]) == pytest.approx(reach)
+    assert abs(m.base_yaw[4]) == pytest.approx(math.pi - reach)
+    assert m.seconds[4] > m.seconds[1]
+    # place 1 is 3 m away: a drive, facing the heading with the head straight
+    assert m.metres[8] == 3.0 and m.pan[8] == 0.0 and m.base_yaw[8] == 0.0
+    assert m.seconds[8] > TIMING.drive(np.array([3.0]))[0]
+    unreachable = moves(open_floor, here, 0.0, np.array([0.0, np.inf]), TIMING)
+    assert np.all(np.isinf(unreachable.seconds[8:])) and np.all(
+        np.isfinite(unreachable.seconds[:8])
+    )
+
+
+def situation(candidates: Candidates, posterior: np.ndarray | None, taken=()) -> Situation:
+    n = candidates.n_views
+    mask = np.zeros(n, dtype=bool)
+    mask[list(taken)] = True
+    m = Moves(np.full(n, 2.0), np.zeros(n), np.zeros(n), np.zeros(n))
+    posteriors = {} if posterior is None else {"box": posterior}
+    return Situation(0, Pose2D(5.0, 5.0, 0.0), m, mask, 1, posteriors, np.zeros(SPEC.shape))
+
+
+def test_the_information_planner_looks_where_the_belief_is_unsure(open_floor):
+    """Half the mass in one cell 1 m north-east of place 0, half spread elsewhere: the view
+    that can settle it faces north-east from place 0; once taken, it is not taken again."""
+    rates = {"box": detection_rates(ScoreCalibration((0.0, 0.5, 1.0), (10, 90), (90, 10)))}
+    prints = {"box": open_floor.for_detector(rates["box"])}
+    planner = GainPlanner("information", open_floor, prints, rates, view_time=1.0)
+    cells = np.full(SPEC.shape, 0.5 / (SPEC.nx * SPEC.ny - 1))
+    row, col = 57, 57  # (5.75, 5.75) m
+    cells[row, col] = 0.5
+    choice = planner.choose(situation(open_floor, cells))
+    assert choice.index == 1 and "information" in choice.why  # place 0, heading 45 degrees
+    again = planner.choose(situation(open_floor, cells, taken=[1]))
+    assert again.index != 1
+    assert planner.choose(situation(open_floor, cells, taken=range(16))) is None
+
+
+def test_the_random_planner_is_reproducible_per_view(open_floor):
+    planner = RandomPlanner(open_floor, seed=3)
+    first = planner.choose(situation(open_floor, None))
+    assert planner.choose(situation(open_floor, None)).index == first.index
+    other = RandomPlanner(open_floor, seed=4)
+    draws = {other.choose(Situation(k, *list(vars(situation(open_floor, None)).values())[1:])).index
+             for k in range(8)}  # fmt: skip
+    assert len(draws) > 1
+
+
+def test_path_length_follows_the_map_round_obstacles():
+    from twin.nav.maps import OccupancyMap
+    from twin.nav.planner import PathPlanner
+
+    cells = np.zeros((60, 60))
+    cells[0:50, 29:31] = 1.0  # a wall from the bottom, open at the top
+    planner = PathPlanner(OccupancyMap(cells, 0.05), radius=0.1, margin=0.0)
+    straight = path_length(planner, [(0.5, 0.5, 0.0), (2.5, 0.5, 0.0)])
+    assert straight > 2 * (2.5 - 0.5)  # up round the wall's end and down again
+    assert path_length(planner, [(0.5, 0.5, 0.0), (0.55, 0.5, 1.0)]) == pytest.approx(0.05)
+
+
+# -- the command in the twin -------------------------------------------------------------------
+
+SMALL = ("search.spacing_m=0.8", "search.max_views=6")
+
+
+def search_argv(out, cache, *sets: str) -> list[str]:
+    argv = ["search", "--out", str(out), "--quiet"]
+    for setting in (f"run.cache={cache}", "run.rerun=off", *SMALL, *sets):
+        argv += ["--set", setting]
+    return argv
+
+
+@pytest.fixture(scope="module")
+def search_run(tmp_path_factory, model_cache):
+    out = tmp_path_factory.mktemp("search") / "run"
+    assert main(search_argv(out, model_cache, "run.rerun=save")) == 0
+    return out
+
+
+def test_a_search_reports_its_views_path_time_and_why_it_stopped(search_run):
+    result = json.loads((search_run / "result.json").read_text())
+    assert result["status"] == "complete" and result["mission"] == "search"
+    assert 1 <= result["views"] <= 6
+    search = result["search"]
+    assert search["planner"] == "information"
+    if result["views"] < 6:
+        assert search["stopped"].startswith("found rice_box")
+        assert result["objects"]["rice_box"]["confidence"] >= 0.95
+    else:
+        assert search["stopped"] in ("view budget spent (6 views)",) or "found" in search["stopped"]
+    assert result["path_length_m"] >= 0 and result["time_s"] == result["robot_time_s"] > 0
+
+
+def test_the_recording_says_why_each_view_was_chosen(search_run):
+    from rerun.chunk import RrdReader
+
+    store = RrdReader(search_run / "recording.rrd").store()
+    entities = set(store.schema().entity_paths())
+    assert {"/plan/why", "/top/map/plan/next", "/top/map/plan/options"} <= entities
+
+
+def test_every_planner_runs_and_a_finished_search_is_not_run_again(
+    tmp_path, model_cache, search_run, capsys
+):
+    for planner in ("coverage", "random", "survey", "detection"):
+        out = tmp_path / planner
+        assert (
+            main([*search_argv(out, model_cache, "search.max_views=2"), "--planner", planner]) == 0
+        )
+        result = json.loads((out / "result.json").read_text())
+        assert result["search"]["planner"] == planner and 1 <= result["views"] <= 2
+    capsys.readouterr()
+    assert main(["search", "--resume", str(search_run)]) == 0
+    assert "nothing to resume" in capsys.readouterr().out
+
+
+def test_search_without_a_map_is_refused_in_one_line(tmp_path, model_cache, capsys):
+    code = main(search_argv(tmp_path / "x", model_cache, "robot.base.pose_source=truth"))
+    err = capsys.readouterr().err
+    assert code == 2 and "pose_source" in err and "Traceback" not in err
+    assert not (tmp_path / "x").exists()
