@@ -203,3 +203,42 @@ def test_an_interrupted_batch_summarizes_the_runs_it_finished(tmp_path, tiny, mo
     monkeypatch.setattr(batch, "run_batch_mission", real)
     assert main(argv) == 0  # the same command finishes the batch
     assert sorted(runs(out)) == [0, 1, 2]
+
+
+def test_a_batch_of_searches_reports_views_path_time_and_why_each_stopped(tmp_path, tiny):
+    out = tmp_path / "s"
+    sets = (*tiny, "search.spacing_m=0.8", "search.max_views=3")
+    argv = ["batch-survey", "--runs", "2", "--seed", "5", *set_args(sets), "--out", str(out),
+            "--workers", "1", "--quiet", "--mission", "search",
+            "--planner", "coverage"]  # fmt: skip
+    assert main(argv) == 0
+    for entry in runs(out).values():
+        assert entry["search"]["planner"] == "coverage" and 1 <= entry["views"] <= 3
+        assert entry["search"]["stopped"] and entry["time_s"] > 0 and entry["path_length_m"] >= 0
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["mission"] == "search" and set(summary["views"]) == {"median", "p90", "mean"}
+    assert main([*argv[:-2], "--planner", "random", "--mission", "survey"]) == 2
+
+
+def test_a_run_the_robot_cannot_finish_is_a_failed_run_not_a_failed_batch(
+    tmp_path, tiny, monkeypatch
+):
+    from twin.app.mission import Mission
+    from twin.core.devices import DeviceFaultError
+
+    real = Mission.observe
+
+    def bumps_on_the_second_view(self, target):
+        if self.views_done == 1:
+            raise DeviceFaultError("sim base", "go to (1, 1) m", "contact", "choose a stop")
+        return real(self, target)
+
+    monkeypatch.setattr(Mission, "observe", bumps_on_the_second_view)
+    out = tmp_path / "b"
+    argv = ["batch-survey", "--runs", "2", "--seed", "4", *set_args(tiny), "--out", str(out),
+            "--workers", "1", "--quiet", "--tolerance", "100"]  # fmt: skip
+    assert main(argv) == 0
+    for entry in runs(out).values():
+        assert entry["views"] == 1 and "contact" in entry["failed"]
+    with (out / "summary.csv").open() as handle:
+        assert [r["success"] for r in csv.DictReader(handle)] == ["0", "0"]

@@ -111,7 +111,7 @@ def test_detection_rates_take_the_best_threshold_and_each_bands_rate():
     assert rates.tpr_at(np.array([1.0, 3.0])) == pytest.approx([50 / 52, 40 / 48])
 
 
-TIMING = TimeModel(BaseLimits(), VCC4_LIMITS, leg_overhead=1.0)
+TIMING = TimeModel(BaseLimits(), VCC4_LIMITS, leg_overhead=1.0, drive_speed=1.0)
 
 
 def test_drive_and_turn_times_follow_the_speed_profile():

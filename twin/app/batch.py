@@ -42,6 +42,7 @@ from typing import Any
 import numpy as np
 
 from twin.app.executors import Executor, kept_in_worker
+from twin.core.devices import DeviceError
 from twin.core.errors import InputError
 from twin.core.store import JsonLinesJournal, json_safe
 
@@ -294,13 +295,21 @@ def run_batch_mission(spec: BatchSpec, run: int) -> dict[str, Any]:
     setup = time.perf_counter() - started
     plan = plan_views(config.mission, world.robot.pantilt.limits)
     search: dict[str, Any] = {}
-    if spec.mission == "search":
-        from twin.app.search import make_searcher
+    failed: dict[str, str] = {}
+    try:
+        if spec.mission == "search":
+            from twin.app.search import make_searcher
 
-        stopped = make_searcher(config, mission, sim.world, plan).run()
-        search = {"search": {"planner": config.search.planner, "stopped": stopped}}
-    else:
-        run_survey(mission, plan)
+            stopped = make_searcher(config, mission, sim.world, plan).run()
+            search = {"search": {"planner": config.search.planner, "stopped": stopped}}
+        else:
+            run_survey(mission, plan)
+    except DeviceError as exc:
+        # The robot could not go on (touched something, lost its way): the run is a failed
+        # mission, counted as one, and the batch goes on; the error says what happened.
+        failed = {"failed": str(exc)}
+        search = {"search": {"planner": config.search.planner, "stopped": f"failed: {exc}"}}
+        search = search if spec.mission == "search" else {}
     result = mission.result(config.grid.peak_separation)
     for name, surface in surfaces.items():
         result["objects"][name]["surface"] = surface
@@ -313,6 +322,7 @@ def run_batch_mission(spec: BatchSpec, run: int) -> dict[str, Any]:
         "time_s": result["robot_time_s"],
         "path_length_m": round(path_length(world.robot.base.planner, mission.state.path), 3),
         **search,
+        **failed,
         "timings_s": {
             "setup": round(setup, 3),
             **result["timings_s"],

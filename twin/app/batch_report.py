@@ -41,7 +41,8 @@ def summary_rows(results: Sequence[dict[str, Any]], tolerance: float) -> list[di
         entry, t = r["objects"][name], r["timings_s"]
         rows.append({
             "run": r["run"],
-            "success": int(entry["error_m"] <= tolerance),
+            # a mission the robot could not finish failed, wherever its estimate was
+            "success": int(entry["error_m"] <= tolerance and "failed" not in r),
             "error_m": entry["error_m"],
             "truth_x": entry["truth_m"][0], "truth_y": entry["truth_m"][1],
             "estimate_x": entry["estimate_m"][0], "estimate_y": entry["estimate_m"][1],

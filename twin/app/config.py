@@ -159,6 +159,12 @@ class SearchOptions:
         doc="what a view costs besides moving (capture, settling): keeps cheap views honest",
     )  # fmt: skip
     seed: int = option(0, low=0, doc='seed of the "random" planner')
+    temperature: float = option(
+        2.0, low=0.01, high=1000.0,
+        doc="the confidence's temperature during a search: the views a search chooses return "
+        "to what it suspects, so their evidence is less independent than a survey's "
+        "(confidence.temperature); fitted on development searches (README)",
+    )  # fmt: skip
 
 
 @dataclass(frozen=True)

@@ -330,7 +330,7 @@ def _fly(config, robot, context, run, resume, started, quiet, on_result) -> dict
             truth=truth,
             max_range=config.grid.max_range,
             belief=belief,
-            confidence_options=config.confidence,
+            confidence_options=_confidence(config, options),
             views=views,
         )
     result = _write_results(
@@ -344,6 +344,15 @@ def _fly(config, robot, context, run, resume, started, quiet, on_result) -> dict
         on_result(result)
     recorder.wait()
     return result
+
+
+def _confidence(config: SurveyConfig, options: RunOptions):
+    """How the run reads its confidence (a search with its own temperature)."""
+    if options.mission == "search":
+        from twin.app.search import search_confidence
+
+        return search_confidence(config)
+    return config.confidence
 
 
 def _checkpointed(checkpoint: Checkpoint, config: SurveyConfig, detector, rooms):

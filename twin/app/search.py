@@ -57,14 +57,19 @@ TAKEN_M, TAKEN_RAD = 0.15, math.radians(10.0)  # a logged view this close is tha
 class TimeModel:
     """Seconds of robot time to get from one view to another (a planner's estimate).
 
-    Drives and turns follow a trapezoidal speed profile with the base's limits; every leg ends
-    with the localizer weighing scans at rest (``leg_overhead``: measured on the twin, see
-    ``benchmarks/search_generality.py``); the head pans at its top speed.
+    Drives and turns follow a trapezoidal speed profile with the base's limits; every move ends
+    with the localizer weighing scans at rest (``leg_overhead``); the head pans at its top speed.
+    A planned drive is slower than one straight leg at top speed: it stops, settles and turns
+    at every waypoint, and the controller creeps in to its goal. Measured on the twin over 27
+    moves of two searches (``benchmarks/bench_search.py``), a drive took about 3.7 s + 4.4 s per
+    metre where one leg at top speed would take 1.8 s + 2 s per metre, hence ``drive_speed``:
+    the share of the top speed a planned drive averages.
     """
 
     base: BaseLimits
     head: PanTiltLimits
-    leg_overhead: float = 1.0  # s: localizing at rest after a leg
+    leg_overhead: float = 2.5  # s: localizing at rest after a move (scans weighed at rest)
+    drive_speed: float = 0.45  # of the base's top speed, on average over a planned drive
 
     @property
     def pan_reach(self) -> float:
@@ -79,7 +84,8 @@ class TimeModel:
         )
 
     def drive(self, metres: np.ndarray) -> np.ndarray:
-        return self._profile(np.asarray(metres, float), self.base.speed, self.base.accel)
+        speed = self.base.speed * self.drive_speed
+        return self._profile(np.asarray(metres, float), speed, self.base.accel)
 
     def turn(self, radians: np.ndarray) -> np.ndarray:
         return self._profile(np.asarray(radians, float), self.base.turn_rate, self.base.turn_accel)
@@ -422,10 +428,14 @@ class Searcher:
             observed,
         )
 
+    def stop_reason(self) -> str | None:
+        """Why the search should stop now (see ``stop_reason``), or None to go on."""
+        return stop_reason(self.mission, self.rule)
+
     def run(self, on_view: Callable[[ViewChoice], None] | None = None) -> str:
         """Take views until a stop reason; returns it."""
         while True:
-            reason = stop_reason(self.mission, self.rule)
+            reason = self.stop_reason()
             if reason is not None:
                 return reason
             choice = self.planner.choose(self.situation())
@@ -483,6 +493,14 @@ def search_candidates(config: Any, world: Any, camera: Any, planner_map: Any, sp
     return candidates
 
 
+def search_confidence(config: Any) -> Any:
+    """How a search reads its confidence: the config's ``[confidence]`` with the search's own
+    temperature (``search.temperature``: a search's views are more alike than a survey's)."""
+    from dataclasses import replace
+
+    return replace(config.confidence, temperature=config.search.temperature)
+
+
 def make_searcher(
     config: Any,
     mission: Mission,
@@ -528,6 +546,7 @@ def make_searcher(
     inner = getattr(robot.base, "inner", robot.base)  # a localized base wraps the device
     timing = TimeModel(getattr(inner, "limits", BaseLimits()), robot.pantilt.limits)
     rule = StopRule(options.confidence, options.absent, options.max_views, options.max_time_s)
+    mission.confidence_options = confidence = search_confidence(config)
     return Searcher(
         mission,
         planner,
@@ -535,8 +554,8 @@ def make_searcher(
         PlaceDistances(planner_map, candidates.places),
         timing,
         rule,
-        config.confidence.temperature,
-        config.confidence.p_absent,
+        confidence.temperature,
+        confidence.p_absent,
     )
 
 
