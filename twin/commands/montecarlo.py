@@ -10,6 +10,13 @@ from pathlib import Path
 from twin.commands._args import comma_list, numbers
 
 DEFAULT_OUT = Path("runs/montecarlo")
+DEFAULT_ACTIVE_OUT = Path("runs/montecarlo-active")
+DEFAULT_VIEWS = (10, 25, 75, 150)
+# With --active every count 1..max is scored; these are the counts the table shows.
+DEFAULT_ACTIVE_VIEWS = (5, 10, 20, 40)
+DEFAULT_FUSION = ("accumulate", "normalized", "logodds")
+DEFAULT_ACTIVE_FUSION = ("accumulate", "logodds")
+ACTIVE_RATE = 0.1  # --active's P_fp and P_fn when not given: one setting, not 121
 
 
 def add_executor_arguments(parser: argparse.ArgumentParser) -> None:
@@ -39,15 +46,18 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "maps with the numbers) and DIR/figure3_3d.png (the paper's surfaces); with --scores "
         "beta DIR/thresholds.png (success over the threshold) instead. "
         "Finished chunks of trials are journaled in DIR/settings.jsonl as they arrive: a sweep "
-        "interrupted in DIR continues where it stopped when run again.",
+        "interrupted in DIR continues where it stopped when run again. "
+        "With --active, planners choose the views instead (see --active); writes "
+        "DIR/active.csv and DIR/active.png.",
     )
     rates = comma_list(float, "rates in [0, 1]")
     # None: not given (the tenths 0..1), so --scores beta can refuse rates it would not use.
     parser.add_argument("--pfp", type=rates, default=None, help="P_fp list (0..1; 0,0.1,..,1)")
     parser.add_argument("--pfn", type=rates, default=None, help="P_fn list (0..1; 0,0.1,..,1)")
     parser.add_argument(
-        "--views", type=comma_list(int, "view counts"), default=(10, 25, 75, 150),
-        help="view counts at which each trial is scored (default 10,25,75,150)",
+        "--views", type=comma_list(int, "view counts"), default=None,
+        help="view counts at which each trial is scored (default 10,25,75,150); with --active "
+        "every count up to the largest is scored and these are the table's (5,10,20,40)",
     )  # fmt: skip
     parser.add_argument("--trials", type=int, default=100, help="trials per setting (100)")
     parser.add_argument("--wedges", type=int, default=8, help="wedges per field of view (8)")
@@ -55,10 +65,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--grid", type=int, default=20, help="grid cells per side (20)")
     parser.add_argument("--supersample", type=int, default=10, help="sub-cells per side (10)")
     parser.add_argument(
-        "--fusion", type=comma_list(str, "rule names"),
-        default=("accumulate", "normalized", "logodds"),
+        "--fusion", type=comma_list(str, "rule names"), default=None,
         help="fusion rules to run (twin.core.fusion's: accumulate, the paper's, normalized, "
-        "logodds, or any rule registered there; default: those three)",
+        "logodds, or any rule registered there; default: those three, with --active "
+        "accumulate,logodds)",
     )  # fmt: skip
     parser.add_argument(
         "--min-observed", type=float, default=1.0,
@@ -88,13 +98,28 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "the two distributions; one setting per threshold (0.16)",
     )  # fmt: skip
     parser.add_argument("--seed", type=int, default=0, help="random seed (0)")
+    parser.add_argument(
+        "--active", type=comma_list(str, "planner names"), default=None, metavar="PLANNERS",
+        help="the active mode: views chosen by these planners (comma list of random, the "
+        "paper's random views; survey, 40 planned views from 5 places; coverage, detection, "
+        "information: greedy per unit cost from lattice views), compared on the same worlds; "
+        "settings --pfp x --pfn (default 0.1 each)",
+    )  # fmt: skip
+    parser.add_argument(
+        "--travel-cost", type=float, default=None,
+        help="--active: a greedy planner's gain is divided by 1 + this x the cells travelled "
+        "(0.1)",
+    )  # fmt: skip
     add_executor_arguments(parser)
     parser.add_argument(
         "--chunk", type=int, default=None,
-        help="trials per task (default 250: ~0.6 s of work, so task overhead stays < 1 %%); "
-        "results do not depend on it",
+        help="trials per task (default 250: ~0.6 s of work, so task overhead stays < 1 %%; "
+        "with --active 25); results do not depend on it",
     )  # fmt: skip
-    parser.add_argument("--out", type=Path, default=DEFAULT_OUT, help=f"folder ({DEFAULT_OUT})")
+    parser.add_argument(
+        "--out", type=Path, default=None,
+        help=f"folder ({DEFAULT_OUT}; with --active {DEFAULT_ACTIVE_OUT})",
+    )  # fmt: skip
     parser.add_argument("--fresh", action="store_true", help="discard a previous sweep in --out")
     parser.add_argument("--quiet", action="store_true", help="no progress bar and no table")
     parser.set_defaults(handler=run)
@@ -117,6 +142,13 @@ def run(args: argparse.Namespace) -> int:
     from twin.app.plots import figure3, figure3_3d, threshold_figure
     from twin.core.errors import InputError
 
+    if args.active is not None:
+        return run_active_mode(args)
+    if args.travel_cost is not None:
+        raise InputError("--travel-cost weighs the active mode's planners; give --active too")
+    args.views = args.views or DEFAULT_VIEWS
+    args.fusion = args.fusion or DEFAULT_FUSION
+    args.out = args.out or DEFAULT_OUT
     if args.scores == "beta" and (args.pfp is not None or args.pfn is not None):
         raise InputError(
             "--pfp/--pfn set a binary detector's rates; with --scores beta the rates follow "
@@ -236,3 +268,69 @@ def summary_table(rows: list[dict[str, object]], config) -> str:
     return "\n".join(
         "  ".join(c.rjust(w) for c, w in zip(line, widths, strict=True)) for line in lines
     )
+
+
+def run_active_mode(args: argparse.Namespace) -> int:
+    """``--active``: planners against random views, every count of views 1..max(--views)."""
+    from tqdm import tqdm
+
+    from twin.app.executors import make_executor
+    from twin.app.montecarlo import JOURNAL_NAME
+    from twin.app.montecarlo_active import (
+        DEFAULT_CHUNK_TRIALS,
+        DEFAULT_TRAVEL_COST,
+        ActiveConfig,
+        active_figure,
+        active_rows,
+        active_table,
+        run_active,
+        write_active_csv,
+    )
+    from twin.app.outputs import check_output_folder, make_output_folder
+    from twin.core.errors import InputError
+
+    if args.occluders != 0.0 or args.scores != "binary":
+        raise InputError(
+            "--active runs the paper's open world with a binary detector; leave out "
+            "--occluders and --scores"
+        )
+    views = args.views or DEFAULT_ACTIVE_VIEWS
+    if any(v < 1 for v in views):
+        raise InputError(f"--views must be positive view counts, got {views!r}")
+    pfp, pfn = args.pfp or (ACTIVE_RATE,), args.pfn or (ACTIVE_RATE,)
+    config = ActiveConfig(
+        planners=args.active, settings=tuple((fp, fn) for fp in pfp for fn in pfn),
+        views=max(views), trials=args.trials, grid=args.grid, wedges=args.wedges,
+        fov=math.radians(args.fov_deg), supersample=args.supersample,
+        fusion=args.fusion or DEFAULT_ACTIVE_FUSION, seed=args.seed,
+        min_observed=args.min_observed,
+        travel_cost=DEFAULT_TRAVEL_COST if args.travel_cost is None else args.travel_cost,
+    )  # fmt: skip
+    chunk = args.chunk if args.chunk is not None else DEFAULT_CHUNK_TRIALS
+    if chunk < 1:
+        raise InputError(f"--chunk must be at least 1 trial, got {chunk}")
+    out = args.out or DEFAULT_ACTIVE_OUT
+    check_output_folder(
+        out, "--out",
+        lambda p: (p / "active.csv").is_file() or (p / JOURNAL_NAME).is_file(),
+        "a twin montecarlo run",
+    )  # fmt: skip
+    make_output_folder(out, "--out")
+    executor = make_executor(args.workers, args.executor, args.address)
+    bar = tqdm(
+        total=len(config.settings) * len(config.planners) * config.trials, unit="trial",
+        desc="montecarlo --active", disable=args.quiet or not sys.stderr.isatty(),
+    )  # fmt: skip
+    try:
+        with bar:
+            results = run_active(
+                config, executor, chunk, on_chunk=lambda c: bar.update(c.stop - c.start)
+            )
+    finally:
+        executor.close()
+    csv_path = write_active_csv(out / "active.csv", active_rows(results))
+    figure = active_figure(out / "active.png", results)
+    if not args.quiet:
+        print(active_table(results, views))
+        print(f"wrote {csv_path}, {figure}")
+    return 0
