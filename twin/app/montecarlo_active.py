@@ -543,19 +543,28 @@ class ActiveResult:
         return out
 
 
-def run_active_chunk(config: ActiveConfig, chunk: ActiveChunk) -> ActiveResult:
-    """One task (module level, so local and Ray workers can import it): its trials summed."""
+@dataclass(frozen=True)
+class ActiveChunkResult:
+    """A task's trials: ``successes`` (rules, views) summed, ``paths`` (trials, views) each
+    trial's distance travelled (kept apart, so the float sums do not depend on the chunks)."""
+
+    chunk: ActiveChunk
+    successes: np.ndarray = field(repr=False)
+    paths: np.ndarray = field(repr=False)
+
+
+def run_active_chunk(config: ActiveConfig, chunk: ActiveChunk) -> ActiveChunkResult:
+    """One task (module level, so local and Ray workers can import it)."""
     context = _Setting(config, chunk.setting)
     trials = range(chunk.start, chunk.stop)
     if chunk.planner == "random":
         successes = run_trials(context.sweep, *chunk.setting, chunk.start, chunk.stop)
-        path = np.sum([_random_path(context.draws(t)) for t in trials], axis=0)
+        paths = np.array([_random_path(context.draws(t)) for t in trials])
     else:
         outcomes = [_planned_trial(context, chunk.planner, t) for t in trials]
         successes = np.sum([o.hits for o in outcomes], axis=0, dtype=np.int64)
-        path = np.sum([o.path for o in outcomes], axis=0)
-    return ActiveResult(*chunk.setting, chunk.planner, len(trials), config.fusion,
-                        np.asarray(successes, dtype=np.int64), path)  # fmt: skip
+        paths = np.array([o.path for o in outcomes])
+    return ActiveChunkResult(chunk, np.asarray(successes, dtype=np.int64), paths)
 
 
 def plan_active_chunks(config: ActiveConfig, chunk_trials: int) -> list[ActiveChunk]:
@@ -579,21 +588,22 @@ def run_active(
 ) -> list[ActiveResult]:
     """Every planner at every setting; results in setting order, planners in config order.
     They do not depend on ``chunk_trials``, the executor or its number of workers."""
-    sums: dict[tuple[tuple[float, float], str], list[ActiveResult]] = {}
+    parts: dict[tuple[tuple[float, float], str], list[ActiveChunkResult]] = {}
     chunks = plan_active_chunks(config, chunk_trials)
     for chunk, result in executor.map_unordered(partial(run_active_chunk, config), chunks):
-        sums.setdefault((chunk.setting, chunk.planner), []).append(result)
+        parts.setdefault((chunk.setting, chunk.planner), []).append(result)
         if on_chunk:
             on_chunk(chunk)
     out = []
     for setting in config.settings:
         for planner in config.planners:
-            parts = sums[(setting, planner)]
+            done = sorted(parts[(setting, planner)], key=lambda p: p.chunk.start)
+            paths = np.concatenate([p.paths for p in done])  # in trial order, however cut
             out.append(
                 ActiveResult(
-                    *setting, planner, sum(p.trials for p in parts), config.fusion,
-                    np.sum([p.successes for p in parts], axis=0, dtype=np.int64),
-                    np.sum([p.path for p in parts], axis=0),
+                    *setting, planner, len(paths), config.fusion,
+                    np.sum([p.successes for p in done], axis=0, dtype=np.int64),
+                    paths.sum(axis=0),
                 )
             )  # fmt: skip
     return out
