@@ -626,6 +626,13 @@ def write_active_csv(path: Path, rows: Sequence[dict[str, object]]) -> Path:
 
 # -- the figure --------------------------------------------------------------------------------
 
+_PLANNER_LABEL = {
+    "random": "random (Figure 3)",
+    "survey": "survey (40 views)",
+    "coverage": "coverage",
+    "detection": "detection",
+    "information": "information",
+}
 _PLANNER_STYLE = {
     "random": {"color": "0.45", "linestyle": "--"},
     "survey": {"color": "tab:brown", "linestyle": "-"},
@@ -654,7 +661,8 @@ def draw_active_figure(results: Sequence[ActiveResult], title: str = ""):
                 counts = np.arange(1, result.successes.shape[1] + 1)
                 rate = 100.0 * result.successes[r] / result.trials
                 style = _PLANNER_STYLE[result.planner]
-                ax.plot(counts, rate, label=result.planner, linewidth=1.6, **style)
+                ax.plot(counts, rate, label=_PLANNER_LABEL[result.planner], linewidth=1.6,
+                        **style)  # fmt: skip
                 if result.planner == "survey":
                     ax.plot(counts[-1], rate[-1], marker="o", color=style["color"])
             ax.set_ylim(0, 100)
@@ -665,7 +673,8 @@ def draw_active_figure(results: Sequence[ActiveResult], title: str = ""):
                 ax.set_xlabel("views")
             if j == 0:
                 ax.set_ylabel("success (%)")
-    axes[0, -1].legend(loc="lower right", fontsize=8, title="planner", title_fontsize=8)
+    handles, labels = axes[0, 0].get_legend_handles_labels()
+    fig.legend(handles, labels, loc="outside lower center", ncols=len(labels), fontsize=9)
     trials = sorted({r.trials for r in results})
     note = f"{trials[0]} trials per planner and setting" if len(trials) == 1 else ""
     fig.suptitle(title or f"Localization success vs views, abstract world; {note}")
