@@ -105,6 +105,61 @@ def test_an_invalid_action_is_penalised_and_not_taken(env):
         env.step(env.action_space.n)
 
 
+def test_an_unreachable_view_is_penalised_and_not_taken(env, monkeypatch):
+    env.reset(seed=32)
+    search = env.unwrapped
+    _, _, _, _, info = env.step(8)  # place 1 (8 headings a place), reachable from the start
+    # From here on the map says no place can be driven to: only turning on the spot is left.
+    nowhere = np.full(len(search.candidates.places), np.inf)
+    monkeypatch.setattr(search.searcher, "place_metres", lambda here: nowhere)
+    obs, _, _, _, info = env.step(9)  # place 1 again, another heading: a turn, no drive
+    assert info["invalid"] is None and info["views"] == 2
+    far = 15 * 8 - 1  # the last place's last heading
+    assert info["action_mask"][far] == 0 and info["action_mask"].sum() > 0
+    again, reward, _, _, after = env.step(far)
+    assert after["invalid"] == "unreachable" and reward == pytest.approx(-INVALID_PENALTY)
+    assert after["views"] == 2 and after["robot_time_s"] == info["robot_time_s"]
+    np.testing.assert_array_equal(again["taken"], obs["taken"])
+
+
+def test_a_robot_that_cannot_go_on_ends_the_episode(env, monkeypatch):
+    from twin.core.devices import DeviceFaultError
+
+    env.reset(seed=33)
+    base = env.unwrapped.mission.robot.base
+
+    def stuck(goal, **_):
+        raise DeviceFaultError(base.name, "go to", "touched the sofa", "clear the way")
+
+    monkeypatch.setattr(base, "go_to", stuck)
+    _, reward, terminated, truncated, info = env.step(40)
+    assert truncated and not terminated and info["views"] == 0
+    assert reward == pytest.approx(-INVALID_PENALTY)
+    assert info["invalid"].startswith("drive failed") and "touched the sofa" in info["stopped"]
+    with pytest.raises(InputError, match="reset"):
+        env.step(41)
+
+
+def test_the_config_planners_episode_is_batch_surveys_search_run(env, model_cache):
+    """An episode is a mission in a reset world: flown by the config's own planner, it is the
+    run of ``twin batch-survey --mission search`` with the episode's draw, view for view."""
+    from twin.app.batch import BatchSpec, run_batch_mission
+
+    _, info = env.reset(seed=51)
+    search, done = env.unwrapped, False
+    while not done:
+        action = search.searcher.planner.choose(search.situation).index
+        _, _, terminated, truncated, info = env.step(action)
+        done = terminated or truncated
+    spec = BatchSpec.from_config(None, small(model_cache), vary=("target",), mission="search")
+    run = run_batch_mission(spec, info["draw"])
+    assert run["views"] == info["views"] and run["time_s"] == info["robot_time_s"]
+    assert run["path_length_m"] == info["path_length_m"]
+    mine = info["objects"]["rice_box"]
+    assert run["objects"]["rice_box"]["truth_m"] == mine["truth_m"]
+    assert run["objects"]["rice_box"]["error_m"] == mine["error_m"]
+
+
 def test_image_observations_and_rendering_show_the_last_frame(model_cache):
     made = gymnasium.make(
         twin.envs.OBJECT_SEARCH,

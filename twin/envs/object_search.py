@@ -18,7 +18,8 @@ valid ones (int8, 1: reachable and not taken) for masked policies.
 Observations (``spaces.Dict``): ``scores`` (objects x columns, float32 in [0, 1]: the last
 view's per-column detector match, zeros before the first view); ``pose`` (x m, y m, yaw rad,
 float32: the localized pose); ``grid`` (objects x ny x nx, float32: the posterior over cells of
-each object's calibrated belief, ``twin.core.confidence.posterior``, what the planners see);
+each object's calibrated belief, ``twin.core.confidence.posterior`` with the search's temperature
+and ``confidence.p_absent``: what the planners see);
 ``taken`` (``MultiBinary(n_views)``); with ``observation="image"`` also ``image`` (the last
 frame, H x W x 3 uint8, black before the first view).
 
@@ -26,8 +27,15 @@ Reward: minus the robot seconds a view cost / 60 (one per robot minute), ``-INVA
 for an invalid action, and when the episode ends +1 per object the search declares found
 (confidence >= ``search.confidence``) whose estimate lies within ``confidence.radius_m`` of the
 truth (the twin knows it). Terminated: every object found or declared absent (``stop_reason``);
-truncated: ``max_views`` steps or ``search.max_time_s`` of robot time spent, or no valid view
-left.
+truncated: ``max_views`` steps or ``search.max_time_s`` of robot time spent, no valid view left,
+or the robot could not go on (a device error on the way: penalised like an invalid action, and
+counted a failed run as ``twin batch-survey`` counts it).
+
+Seeding: ``reset(seed=s)`` draws one number ``d`` from the env's generator (``info["draw"]``);
+the objects' places (and lighting and threshold, when varied) are then those of run ``d`` of a
+``twin batch-survey --seed 0`` with the same config and ``--vary``, so an episode the config's
+own planner flies (``env.searcher.planner.choose(env.situation)`` each step) is that batch's
+``--mission search`` run ``d``, view for view.
 """
 
 from __future__ import annotations
@@ -55,7 +63,7 @@ from twin.app.search import (
 )
 from twin.app.survey import plan_views
 from twin.core.confidence import posterior
-from twin.core.devices import DeviceFaultError
+from twin.core.devices import DeviceError
 from twin.core.errors import InputError
 from twin.core.geometry import wrap_angle
 
@@ -163,6 +171,8 @@ class ObjectSearchEnv(gymnasium.Env):
         self._steps = self._invalid = 0
         self._path_m = 0.0
         self._done = False
+        self._fault: str | None = None
+        self._draw = -1
         self._last: dict[str, Any] = {}
 
     # -- the public state -----------------------------------------------------------------------
@@ -205,7 +215,8 @@ class ObjectSearchEnv(gymnasium.Env):
         world = self._live_world()
         # One number from the env's generator picks the draw; the world's randomized factors
         # are then those of batch-survey's run of that number (twin.app.batch.draw_mission).
-        draw = draw_mission(self._spec, int(self.np_random.integers(DRAW_LIMIT)))
+        self._draw = int(self.np_random.integers(DRAW_LIMIT))
+        draw = draw_mission(self._spec, self._draw)
         self._surfaces = world.reset(self._spec, draw)
         self._truth = {
             name: tuple(float(v) for v in world.sim.world.body_position(body))
@@ -224,6 +235,7 @@ class ObjectSearchEnv(gymnasium.Env):
         self._steps = self._invalid = 0
         self._path_m = 0.0
         self._done = False
+        self._fault = None
         self._last = {"action": None, "invalid": None, "stopped": None}
         self._situation = self._searcher.situation()
         return self._observation(), self._info()
@@ -254,10 +266,14 @@ class ObjectSearchEnv(gymnasium.Env):
             )
             try:
                 record = mission.observe(choice)
-            except DeviceFaultError as exc:
-                # The drive failed on the way (something in the corridor the map lacks): no view,
-                # but the robot time spent counts, and the step is penalised as invalid.
+            except DeviceError as exc:
+                # The robot could not go on (touched something, was left where no path can
+                # start, lost its way): no view, the robot time spent counts, the step is
+                # penalised as an invalid one, and the episode is cut short as batch-survey
+                # counts such a run failed: a robot left inside the planning margin would fail
+                # every later drive too.
                 invalid = f"drive failed: {exc}"
+                self._fault = str(exc)
                 reward -= (mission.robot.camera.now() - clock) / SECONDS_PER_UNIT
             else:
                 reward -= (mission.state.robot_time - before) / SECONDS_PER_UNIT
@@ -351,6 +367,8 @@ class ObjectSearchEnv(gymnasium.Env):
         states = verdicts(mission, self._searcher.rule)
         if mission.views_done > 0 and all(s != "sought" for s in states.values()):
             return True, False, stop_reason(mission, self._searcher.rule)
+        if self._fault is not None:
+            return False, True, f"the robot could not go on: {self._fault}"
         if self._steps >= self.max_views:
             return False, True, f"step budget spent ({self.max_views} steps)"
         if mission.state.robot_time >= self.max_time:
@@ -368,10 +386,12 @@ class ObjectSearchEnv(gymnasium.Env):
         situation, mission = self.situation, self.mission
         here = situation.here
         pose = np.array([here.x, here.y, wrap_angle(here.yaw)], dtype=np.float32)
-        options = self.config.confidence
+        # the searcher's temperature and prior (a search reads its belief with its own
+        # temperature, search.temperature): exactly the posterior its planners weigh
+        search = self._searcher
         grid = np.stack(
             [
-                posterior(mission.belief.layer(name), options.temperature, options.p_absent)[0]
+                posterior(mission.belief.layer(name), search.temperature, search.p_absent)[0]
                 for name in self.objects
             ]
         )
@@ -388,8 +408,11 @@ class ObjectSearchEnv(gymnasium.Env):
         return obs
 
     def _info(self) -> dict[str, Any]:
-        """Per object the estimate, error (the twin's truth), confidence and verdict; the views,
-        steps, robot time and path; the action mask. Fresh objects every call."""
+        """Per object the estimate and error (m, against the twin's truth; None before the
+        first view), confidence, P(absent) and verdict; the views taken, steps (views and
+        invalid actions), robot time (s), path length between views (m), the last action and
+        why it was invalid, why the episode stopped, the action mask and the draw (see the
+        module docstring). Fresh objects every call: a caller may keep them."""
         mission = self.mission
         details = mission.confidence_details()
         states = verdicts(mission, self._searcher.rule)
@@ -419,4 +442,5 @@ class ObjectSearchEnv(gymnasium.Env):
             "invalid": self._last.get("invalid"),
             "stopped": self._last.get("stopped"),
             "action_mask": self.action_mask(),
+            "draw": self._draw,
         }
