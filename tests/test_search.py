@@ -251,3 +251,24 @@ def test_search_without_a_map_is_refused_in_one_line(tmp_path, model_cache, caps
     err = capsys.readouterr().err
     assert code == 2 and "pose_source" in err and "Traceback" not in err
     assert not (tmp_path / "x").exists()
+
+
+def test_a_cell_seen_facing_one_way_is_worth_less_seen_that_way_again(open_floor):
+    """The same belief; once the cells north-east of place 0 were seen facing north-east, the
+    same view again is worth less, and views facing elsewhere are not discounted."""
+    rates = {"box": detection_rates(ScoreCalibration((0.0, 0.5, 1.0), (10, 90), (90, 10)))}
+    prints = {"box": open_floor.for_detector(rates["box"])}
+    planner = GainPlanner("information", open_floor, prints, rates, 1.0, repeat_discount=0.5)
+    cells = np.full(SPEC.nx * SPEC.ny, 1.0 / (SPEC.nx * SPEC.ny))
+    before = situation(open_floor, cells)
+    fresh = planner.gains(before)
+    repeats = np.zeros((SPEC.nx * SPEC.ny, 8))
+    f = open_floor.footprints
+    rows = np.flatnonzero(f.row_view == 1)  # place 0 facing 45 degrees
+    span = slice(f.indptr[rows[0]], f.indptr[rows[-1] + 1])
+    np.add.at(repeats[:, 1], f.cells[span], f.share[span])
+    after = planner.gains(Situation(1, before.here, before.moves, before.taken, 1,
+                                    before.posteriors, before.observed, repeats))  # fmt: skip
+    assert after[1] < 0.6 * fresh[1]  # the same view again: half its news or less
+    assert after[8 + 1] == pytest.approx(fresh[8 + 1])  # place 1's cells were not seen
+    assert after[4] == pytest.approx(fresh[4])  # facing the other way: all news

@@ -109,3 +109,19 @@ def test_bad_footprints_and_posteriors_are_one_line_errors():
         Footprints(np.array([0, 5]), np.zeros(1), np.zeros(1), np.zeros(1), np.zeros(1), 1, 9)
     with pytest.raises(InputError, match=r"\[0, 1\]"):
         Footprints(np.array([0, 1]), np.zeros(1), np.array([2.0]), np.zeros(1), np.zeros(1), 1, 9)
+
+
+def test_novelty_scales_what_a_view_can_still_tell():
+    prints = one_column([0, 1, 2])
+    cells = np.full(9, 1 / 9)
+    fresh = information_gain(prints, cells, 0.05)[0]
+    entries = len(prints.cells)
+    assert information_gain(prints, cells, 0.05, np.ones(entries))[0] == pytest.approx(fresh)
+    assert information_gain(prints, cells, 0.05, np.zeros(entries))[0] == pytest.approx(0.0)
+    half = information_gain(prints, cells, 0.05, np.full(entries, 0.5))[0]
+    assert 0.0 < half < fresh
+    assert detection_probability(prints, cells, 1.0, np.full(entries, 0.5))[0] == pytest.approx(
+        0.5 * detection_probability(prints, cells, 1.0)[0]
+    )
+    with pytest.raises(InputError, match="novelty"):
+        information_gain(prints, cells, 0.05, np.ones(entries + 1))

@@ -154,11 +154,22 @@ class SearchOptions:
         0.4, unit="m", low=0.1, high=5.0, doc="views are taken from a lattice of this spacing"
     )
     headings: int = option(8, low=4, high=64, doc="directions a view may face at each place")
+    clearance_m: float = option(
+        0.2, unit="m", low=0.0, high=2.0,
+        doc="views are taken this much farther from obstacles than the drives keep: room to "
+        "turn, and to localize (the narrow gaps between furniture are driven through only)",
+    )  # fmt: skip
     view_time_s: float = option(
         1.5, unit="s", low=0.0, high=600.0,
         doc="what a view costs besides moving (capture, settling): keeps cheap views honest",
     )  # fmt: skip
     seed: int = option(0, low=0, doc='seed of the "random" planner')
+    repeat_discount: float = option(
+        0.5, low=0.0, high=1.0,
+        doc="what a view of a cell from where it was seen before is still worth, per earlier "
+        "such view: it mostly shows what they showed (the same background, the same "
+        "distractor); 1 trusts the belief's independent views",
+    )  # fmt: skip
     temperature: float = option(
         2.0, low=0.01, high=1000.0,
         doc="the confidence's temperature during a search: the views a search chooses return "

@@ -179,6 +179,8 @@ class Situation:
     places_visited: int
     posteriors: dict[str, np.ndarray] = field(default_factory=dict)  # sought objects only
     observed: np.ndarray | None = None  # (ny, nx) views' seen share per cell, summed
+    # (n_cells, headings): how often each cell was seen facing each heading (share-weighted)
+    repeats: np.ndarray | None = None
 
 
 class Planner(Protocol):
@@ -201,12 +203,26 @@ class GainPlanner:
         rates: dict[str, DetectionRates],
         view_time: float,
         tilt: float = 0.0,
+        repeat_discount: float = 1.0,
     ) -> None:
         if name not in ("information", "detection", "coverage"):
             raise InputError(f"unknown gain planner {name!r}")
         self.name, self.candidates, self.footprints = name, candidates, footprints
         self.rates, self.view_time, self.tilt = rates, view_time, tilt
+        self.repeat_discount = repeat_discount
         self._shares = next(iter(footprints.values())) if footprints else None
+        f = candidates.footprints
+        # each footprint entry's heading: the direction its cell would be seen from
+        rows = np.repeat(np.arange(f.rows), np.diff(f.indptr))
+        self._entry_heading = (f.row_view[rows] % len(candidates.headings)).astype(np.intp)
+
+    def novelty(self, situation: Situation) -> np.ndarray | None:
+        """Per footprint entry, the share of what the view would show there that is news:
+        ``repeat_discount`` to the power of the views that saw the cell facing the same way."""
+        if situation.repeats is None or self.repeat_discount >= 1.0:
+            return None
+        seen = situation.repeats[self.candidates.footprints.cells, self._entry_heading]
+        return self.repeat_discount**seen
 
     def gains(self, situation: Situation) -> np.ndarray:
         """(n_views,) the expected gain of every candidate (nats, probability, or cells)."""
@@ -215,12 +231,13 @@ class GainPlanner:
                 raise InputError("the coverage planner needs the grid's seen counts")
             return unseen_coverage(self._shares, situation.observed)
         total = np.zeros(self.candidates.n_views)
+        novelty = self.novelty(situation)
         for name, cells in situation.posteriors.items():
             prints, rates = self.footprints[name], self.rates[name]
             if self.name == "information":
-                total += information_gain(prints, cells, rates.fpr)
+                total += information_gain(prints, cells, rates.fpr, novelty)
             else:
-                total += detection_probability(prints, cells, rates.contrast)
+                total += detection_probability(prints, cells, rates.contrast, novelty)
         return total
 
     def choose(self, situation: Situation) -> ViewChoice | None:
@@ -233,8 +250,17 @@ class GainPlanner:
         order = np.argsort(np.where(eligible, -scores, np.inf), kind="stable")
         best = int(order[0])
         unit = {"information": "nats", "detection": "P(detect)", "coverage": "cells unseen"}
+        x, y = self.candidates.places[self.candidates.place_of(best)]
+        heading = math.degrees(self.candidates.heading_of(best))
+        seen = [
+            f"{100 * detection_probability(self.candidates.footprints, cells)[best]:.0f} % of "
+            f"{name}'s belief"
+            for name, cells in situation.posteriors.items()
+        ]
         why = (
-            f"{self.name}: {gains[best]:.3f} {unit[self.name]} expected for "
+            f"from ({x:.2f}, {y:.2f}) m facing {heading:.0f} deg"
+            + (f", seeing {', '.join(seen)}" if seen else "")
+            + f": {self.name}: {gains[best]:.3f} {unit[self.name]} expected for "
             f"{seconds[best]:.1f} s ({situation.moves.metres[best]:.2f} m to drive), "
             f"{scores[best]:.4f}/s, best of {int(eligible.sum())} views"
         )
@@ -400,12 +426,18 @@ class Searcher:
         place_metres = self.place_metres(here)
         taken = np.zeros(cand.n_views, dtype=bool)
         visited: list[tuple[float, float]] = []
+        f = cand.footprints
+        repeats = np.zeros((f.n_cells, len(cand.headings)))
         for logged in mission.views.views:
             ox, oy = logged.origin
             axis = float(np.mean(logged.wedges))
             view, metres, radians = cand.nearest(ox, oy, axis)
             if metres <= TAKEN_M and radians <= TAKEN_RAD:
                 taken[view] = True
+            # what it saw, as the nearest candidate would have (for the planner's novelty)
+            rows = np.flatnonzero(f.row_view == view)
+            span = slice(f.indptr[rows[0]], f.indptr[rows[-1] + 1])
+            np.add.at(repeats[:, view % len(cand.headings)], f.cells[span], f.share[span])
             if not visited or math.hypot(ox - visited[-1][0], oy - visited[-1][1]) > SAME_PLACE:
                 visited.append((ox, oy))
         posteriors = {}
@@ -426,6 +458,7 @@ class Searcher:
             len(visited),
             posteriors,
             observed,
+            repeats,
         )
 
     def stop_reason(self) -> str | None:
@@ -464,9 +497,11 @@ def search_candidates(config: Any, world: Any, camera: Any, planner_map: Any, sp
 
     options, spec = config.search, config.grid.spec
     occupancy = planner_map.map
-    places = lattice_places(
-        planner_map.blocked, occupancy.origin[:2], occupancy.resolution, options.spacing_m
-    )
+    # Views are taken where the robot has room: ``clearance_m`` beyond what its legs keep, so
+    # it can turn on the spot, and its laser sees more than a wall at arm's length.
+    half = occupancy.resolution / 2.0
+    roomy = planner_map.distance - half >= planner_map.clearance + options.clearance_m
+    places = lattice_places(~roomy, occupancy.origin[:2], occupancy.resolution, options.spacing_m)
     reach = default_reach((spec.x_min, spec.y_min, spec.x_max, spec.y_max), config.grid.max_range)
     key = candidates_key(
         config.scene,
@@ -541,8 +576,9 @@ def make_searcher(
         planner = PlanPlanner(plan)
     else:
         planner = GainPlanner(
-            options.planner, candidates, footprints, rates, options.view_time_s, tilt
-        )
+            options.planner, candidates, footprints, rates, options.view_time_s, tilt,
+            options.repeat_discount,
+        )  # fmt: skip
     inner = getattr(robot.base, "inner", robot.base)  # a localized base wraps the device
     timing = TimeModel(getattr(inner, "limits", BaseLimits()), robot.pantilt.limits)
     rule = StopRule(options.confidence, options.absent, options.max_views, options.max_time_s)

@@ -183,28 +183,54 @@ def _check_rate(name: str, value: float) -> float:
     return float(value)
 
 
-def information_gain(footprints: Footprints, cell_probs: np.ndarray, fpr: float) -> np.ndarray:
+def _lift(footprints: Footprints, novelty: np.ndarray | None) -> np.ndarray:
+    if novelty is None:
+        return footprints.lift
+    novelty = np.asarray(novelty, dtype=float)
+    if novelty.shape != footprints.lift.shape:
+        raise InputError(
+            f"novelty must give one factor per footprint entry ({footprints.lift.size}), "
+            f"got shape {novelty.shape}"
+        )
+    return footprints.lift * np.clip(novelty, 0.0, 1.0)
+
+
+def information_gain(
+    footprints: Footprints,
+    cell_probs: np.ndarray,
+    fpr: float,
+    novelty: np.ndarray | None = None,
+) -> np.ndarray:
     """(n_views,) expected information (nats) each view's columns give about the object's cell,
     given the posterior ``cell_probs`` (any shape with ``n_cells`` entries, summing to at most
-    1: the rest is "absent") and the detector's false-positive rate ``fpr``."""
+    1: the rest is "absent") and the detector's false-positive rate ``fpr``.
+
+    ``novelty`` (one factor in [0, 1] per footprint entry) scales each entry's lift: how much
+    of what the view would show there is news. Views of a cell from where it was seen before
+    mostly repeat what those showed (the same background, the same distractor), which the
+    belief's independent views do not know; a planner says so here."""
     p = _check_cells(footprints, cell_probs, "the posterior")
     f = footprints
     fpr = _check_rate("fpr", fpr)
-    lift = np.minimum(f.lift, 1.0 - fpr)
+    lift = np.minimum(_lift(f, novelty), 1.0 - fpr)
     return _information(p, f.indptr, f.cells, lift, f.row_view, f.n_views, fpr)
 
 
 def detection_probability(
-    footprints: Footprints, cell_probs: np.ndarray, contrast: float = 1.0
+    footprints: Footprints,
+    cell_probs: np.ndarray,
+    contrast: float = 1.0,
+    novelty: np.ndarray | None = None,
 ) -> np.ndarray:
     """(n_views,) probability that each view's columns detect the object (Ye & Tsotsos): the
-    posterior mass each sees, weighed by the lift, divided by ``contrast`` (TPR - FPR at its
-    best, the lift of a fully seen, near cell), so a perfect view of all the mass scores 1."""
+    posterior mass each sees, weighed by the lift (and ``novelty``, as ``information_gain``),
+    divided by ``contrast`` (TPR - FPR at its best, the lift of a fully seen, near cell), so a
+    perfect view of all the mass scores 1."""
     p = _check_cells(footprints, cell_probs, "the posterior")
     if not (math.isfinite(contrast) and contrast > 0.0):
         raise InputError(f"contrast must be TPR - FPR > 0, got {contrast!r}")
     f = footprints
-    return _weighted(p, f.indptr, f.cells, f.lift, f.row_view, f.n_views) / contrast
+    return _weighted(p, f.indptr, f.cells, _lift(f, novelty), f.row_view, f.n_views) / contrast
 
 
 def unseen_coverage(footprints: Footprints, observed: np.ndarray) -> np.ndarray:
