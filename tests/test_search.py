@@ -272,3 +272,27 @@ def test_a_cell_seen_facing_one_way_is_worth_less_seen_that_way_again(open_floor
     assert after[1] < 0.6 * fresh[1]  # the same view again: half its news or less
     assert after[8 + 1] == pytest.approx(fresh[8 + 1])  # place 1's cells were not seen
     assert after[4] == pytest.approx(fresh[4])  # facing the other way: all news
+
+
+def test_a_place_the_base_refuses_is_struck_off_and_the_search_goes_on(
+    tmp_path, model_cache, monkeypatch
+):
+    from twin.app.mission import Mission
+    from twin.core.devices import DeviceFaultError
+
+    real, refused = Mission.observe, []
+
+    def refuses_once(self, target):
+        if self.views_done == 1 and not refused:
+            refused.append(target)
+            raise DeviceFaultError("sim base", "go to", "the laser sees something", "clear it")
+        return real(self, target)
+
+    monkeypatch.setattr(Mission, "observe", refuses_once)
+    out = tmp_path / "run"
+    assert main(search_argv(out, model_cache, "search.max_views=3", "search.confidence=1.0")) == 0
+    result = json.loads((out / "result.json").read_text())
+    assert result["views"] == 3 and result["search"]["stopped"] == "view budget spent (3 views)"
+    (entry,) = result["search"]["unreachable"]
+    assert entry["view"] == 1 and "laser sees something" in entry["reason"]
+    assert math.dist(entry["place_m"], (refused[0].base.x, refused[0].base.y)) < 0.2

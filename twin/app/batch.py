@@ -300,8 +300,10 @@ def run_batch_mission(spec: BatchSpec, run: int) -> dict[str, Any]:
         if spec.mission == "search":
             from twin.app.search import make_searcher
 
-            stopped = make_searcher(config, mission, sim.world, plan).run()
-            search = {"search": {"planner": config.search.planner, "stopped": stopped}}
+            searcher = make_searcher(config, mission, sim.world, plan)
+            stopped = searcher.run()
+            search = {"search": {"planner": config.search.planner, "stopped": stopped,
+                                 "unreachable": searcher.unreachable}}  # fmt: skip
         else:
             run_survey(mission, plan)
     except DeviceError as exc:

@@ -337,7 +337,7 @@ def _fly(config, robot, context, run, resume, started, quiet, on_result) -> dict
         config, mission, scene, out, options, status, total, setup_time, started
     )
     if searcher is not None:
-        result = _search_results(out, result, config, stop_reason)
+        result = _search_results(out, result, config, stop_reason, searcher.unreachable)
     if stopped_by is not None:
         raise stopped_by
     if on_result is not None:
@@ -477,15 +477,21 @@ def _write_results(
 
 
 def _search_results(
-    out: Path, result: dict[str, Any], config: SurveyConfig, stop_reason: str | None
+    out: Path,
+    result: dict[str, Any],
+    config: SurveyConfig,
+    stop_reason: str | None,
+    unreachable: list[dict[str, Any]],
 ) -> dict[str, Any]:
-    """A search's result adds its planner and why it stopped (None: it did not finish)."""
+    """A search's result adds its planner, why it stopped (None: it did not finish) and the
+    places the base refused to reach this session."""
     result = {
         **result,
         "search": {
             "planner": config.search.planner,
             "stopped": stop_reason,
             "confidence_goal": config.search.confidence,
+            "unreachable": unreachable,
         },
     }
     write_text_atomic(out / RESULT_FILE, json.dumps(json_safe(result), indent=1))

@@ -38,7 +38,7 @@ import numpy as np
 from twin.app.candidates import Candidates, DetectionRates
 from twin.app.mission import Mission
 from twin.core.confidence import posterior
-from twin.core.devices import BaseLimits, PanTiltLimits
+from twin.core.devices import BaseLimits, DeviceFaultError, PanTiltLimits
 from twin.core.errors import InputError
 from twin.core.geometry import Pose2D, wrap_angle
 from twin.core.view_gain import (
@@ -49,6 +49,7 @@ from twin.core.view_gain import (
 )
 
 PAN_MARGIN = math.radians(5.0)  # stay clear of the head's end stops (as the survey does)
+MAX_REFUSALS = 3  # places refused in a row before a search gives up (the base is in trouble)
 SAME_PLACE = 0.15  # metres: a candidate this close to the robot is reached without driving
 TAKEN_M, TAKEN_RAD = 0.15, math.radians(10.0)  # a logged view this close is that candidate
 
@@ -417,6 +418,9 @@ class Searcher:
         self.mission, self.planner, self.candidates = mission, planner, candidates
         self.place_metres, self.timing, self.rule = place_metres, timing, rule
         self.temperature, self.p_absent = temperature, p_absent
+        # places the robot could not reach this session, and why (result.json reports them)
+        self.unreachable: list[dict[str, Any]] = []
+        self._blocked_places: set[int] = set()
 
     def situation(self) -> Situation:
         mission, cand = self.mission, self.candidates
@@ -424,6 +428,7 @@ class Searcher:
         here = robot.base.pose()
         pan_now = float(robot.pantilt.position()[0])
         place_metres = self.place_metres(here)
+        place_metres[list(self._blocked_places)] = np.inf
         taken = np.zeros(cand.n_views, dtype=bool)
         visited: list[tuple[float, float]] = []
         f = cand.footprints
@@ -466,7 +471,15 @@ class Searcher:
         return stop_reason(self.mission, self.rule)
 
     def run(self, on_view: Callable[[ViewChoice], None] | None = None) -> str:
-        """Take views until a stop reason; returns it."""
+        """Take views until a stop reason; returns it.
+
+        A candidate's place the base refuses to reach (``DeviceFaultError``: no safe path, the
+        laser sees something the map does not hold in the way, or a touch its recovery could
+        not get round) is struck off for this session and another view is chosen: a search,
+        unlike a fixed plan, has other places to look from. The base has stopped, backed off
+        and localized again before it refuses, and the refusal is reported (``unreachable``);
+        ``MAX_REFUSALS`` in a row end the search with the error."""
+        refusals = 0
         while True:
             reason = self.stop_reason()
             if reason is not None:
@@ -476,7 +489,20 @@ class Searcher:
                 return f"no view left to take ({self.planner.name})"
             if on_view is not None:
                 on_view(choice)
-            self.mission.observe(choice)
+            try:
+                self.mission.observe(choice)
+                refusals = 0
+            except DeviceFaultError as exc:
+                refusals += 1
+                if choice.index < 0 or refusals >= MAX_REFUSALS:
+                    raise
+                place = self.candidates.place_of(choice.index)
+                self._blocked_places.add(place)
+                x, y = (float(v) for v in self.candidates.places[place])
+                self.unreachable.append(
+                    {"view": self.mission.views_done, "place_m": [x, y], "reason": str(exc)}
+                )
+                self.mission.say(f"({x:.2f}, {y:.2f}) m not reached, looking elsewhere: {exc}")
 
 
 # -- wiring ---------------------------------------------------------------------------------------
