@@ -64,6 +64,7 @@ from twin.app.montecarlo import (
     _TIE_RTOL,
     BINARY_VALUES,
     SweepConfig,
+    TrialDraws,
     _score,
     _span_meets_wedge,
     draw_trial,
@@ -377,7 +378,8 @@ class _Setting:
         self.place_of = self.candidates.place_of
         self._first: dict[str, int] = {}
 
-    def draws(self, trial: int):
+    def draws(self, trial: int) -> TrialDraws:
+        """Trial ``trial``'s draws: the sweep's, so every planner faces the same world."""
         return draw_trial(self.sweep, sweep_trial_rng(self.sweep, self.pfp, self.pfn, trial))
 
     def gains(self, planner: str, state: np.ndarray) -> np.ndarray:
@@ -461,7 +463,7 @@ def _planned_trial(context: _Setting, planner: str, trial: int) -> ActiveTrial:
     return ActiveTrial(hits, path, views, (draws.object_row, draws.object_col))
 
 
-def _random_path(draws) -> np.ndarray:
+def _random_path(draws: TrialDraws) -> np.ndarray:
     """(V,) the distance (cells) walked by a trial's random views after each view."""
     steps = np.hypot(np.diff(draws.x), np.diff(draws.y))
     return np.concatenate([[0.0], np.cumsum(steps)])
