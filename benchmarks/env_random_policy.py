@@ -112,7 +112,7 @@ def main() -> None:
                     f"{policy:6s} seed {row['seed']}: {row['steps']:2d} steps ({row['views']} "
                     f"views, {row['invalid']} invalid), {row['time_s']:6.1f} s robot, "
                     f"{row['path_m']:5.2f} m path, error {row['error_m']:.2f} m, return "
-                    f"{row['return']:+.3f}, {row['ended']} ({row['stopped']}), "
+                    f"{row['return']:+.3f}, {row['ended']} ({row['stopped'][:100]}), "
                     f"{row['steps'] / row['step_wall_s']:.2f} steps/s",
                     flush=True,
                 )
