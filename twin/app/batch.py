@@ -296,6 +296,7 @@ def run_batch_mission(spec: BatchSpec, run: int) -> dict[str, Any]:
     plan = plan_views(config.mission, world.robot.pantilt.limits)
     search: dict[str, Any] = {}
     failed: dict[str, str] = {}
+    searcher = None
     try:
         if spec.mission == "search":
             from twin.app.search import make_searcher
@@ -310,8 +311,10 @@ def run_batch_mission(spec: BatchSpec, run: int) -> dict[str, Any]:
         # The robot could not go on (touched something, lost its way): the run is a failed
         # mission, counted as one, and the batch goes on; the error says what happened.
         failed = {"failed": str(exc)}
-        search = {"search": {"planner": config.search.planner, "stopped": f"failed: {exc}"}}
-        search = search if spec.mission == "search" else {}
+        if spec.mission == "search":
+            refused = searcher.unreachable if searcher is not None else []
+            search = {"search": {"planner": config.search.planner, "stopped": f"failed: {exc}",
+                                 "unreachable": refused}}  # fmt: skip
     result = mission.result(config.grid.peak_separation)
     for name, surface in surfaces.items():
         result["objects"][name]["surface"] = surface

@@ -165,7 +165,7 @@ class SearchOptions:
     )  # fmt: skip
     seed: int = option(0, low=0, doc='seed of the "random" planner')
     repeat_discount: float = option(
-        0.5, low=0.0, high=1.0,
+        0.7, low=0.0, high=1.0,
         doc="what a view of a cell from where it was seen before is still worth, per earlier "
         "such view: it mostly shows what they showed (the same background, the same "
         "distractor); 1 trusts the belief's independent views",

@@ -50,9 +50,11 @@ RECENTRE_MIN_YAW = math.radians(1.5)
 # obstacle outlines (mean log-likelihood above -1.1 with the table's sigma)
 MATCH_MIN_MEAN_LOG_LIKELIHOOD = -1.1
 BACK_OFF_M = 0.20  # how far the base backs away after touching something
-# A leg may start this far inside the planning margin: a goal at the margin's edge is reached
-# within the base's 5 cm, and the next leg must still be able to leave it.
-START_TOLERANCE = 0.10
+# A leg may start this far inside the planning margin (from the nearest cell outside it): a
+# goal at the margin's edge is reached within the base's 5 cm, a leg stopped short by the laser
+# or backed off a touch leaves the robot nearer, and the next leg must still be able to leave;
+# its first stretch heads straight for the margin's edge, away from what is nearest.
+START_TOLERANCE = 0.25
 
 
 @dataclass(frozen=True)
