@@ -37,7 +37,9 @@ def placement(info: dict) -> dict:
 def test_gymnasium_make_gives_the_environment_after_import(env):
     assert env.spec.id == "twin/ObjectSearch-v0"
     assert isinstance(env.unwrapped, ObjectSearchEnv)
-    assert env.action_space.n == env.unwrapped.candidates.n_views == 15 * 8
+    candidates = env.unwrapped.candidates
+    assert env.action_space.n == candidates.n_views == len(candidates.places) * 8
+    assert len(candidates.places) >= 4  # the tests below take views at several places
     assert set(env.observation_space.spaces) == {"scores", "pose", "grid", "taken"}
 
 
@@ -64,7 +66,9 @@ def test_the_same_seed_gives_the_same_episode_start_and_another_seed_another(env
 
 def test_a_fixed_action_sequence_ends_within_the_budget(env):
     _, info = env.reset(seed=21)
-    actions = [0, 44, 90, 117, 3, 60]  # more than the budget: the episode must end before
+    n = env.action_space.n
+    # more actions than the budget: the episode must end before they run out
+    actions = [0, n // 3, (2 * n) // 3, n - 1, 3, n // 2]
     steps, total, ended = 0, 0.0, False
     for action in actions:
         time_before = info["robot_time_s"]
@@ -114,7 +118,7 @@ def test_an_unreachable_view_is_penalised_and_not_taken(env, monkeypatch):
     monkeypatch.setattr(search.searcher, "place_metres", lambda here: nowhere)
     obs, _, _, _, info = env.step(9)  # place 1 again, another heading: a turn, no drive
     assert info["invalid"] is None and info["views"] == 2
-    far = 15 * 8 - 1  # the last place's last heading
+    far = env.action_space.n - 1  # the last place's last heading
     assert info["action_mask"][far] == 0 and info["action_mask"].sum() > 0
     again, reward, _, _, after = env.step(far)
     assert after["invalid"] == "unreachable" and reward == pytest.approx(-INVALID_PENALTY)
@@ -122,22 +126,33 @@ def test_an_unreachable_view_is_penalised_and_not_taken(env, monkeypatch):
     np.testing.assert_array_equal(again["taken"], obs["taken"])
 
 
-def test_a_robot_that_cannot_go_on_ends_the_episode(env, monkeypatch):
+def test_a_place_the_base_refuses_is_struck_off_and_refusals_in_a_row_end_it(env, monkeypatch):
+    """As a search does: a refused drive is penalised and its place struck off; MAX_REFUSALS
+    refusals in a row end the episode (batch-survey counts such a run failed)."""
+    from twin.app.search import MAX_REFUSALS
     from twin.core.devices import DeviceFaultError
 
     env.reset(seed=33)
     base = env.unwrapped.mission.robot.base
 
-    def stuck(goal, **_):
+    def refuses(goal, **_):
         raise DeviceFaultError(base.name, "go to", "touched the sofa", "clear the way")
 
-    monkeypatch.setattr(base, "go_to", stuck)
-    _, reward, terminated, truncated, info = env.step(40)
-    assert truncated and not terminated and info["views"] == 0
-    assert reward == pytest.approx(-INVALID_PENALTY)
-    assert info["invalid"].startswith("drive failed") and "touched the sofa" in info["stopped"]
+    monkeypatch.setattr(base, "go_to", refuses)
+    places = env.unwrapped.candidates.places
+    for k in range(MAX_REFUSALS):
+        view = (k + 1) * 8  # a heading at places 1, 2, 3
+        _, reward, terminated, truncated, info = env.step(view)
+        assert info["invalid"].startswith("drive failed") and info["views"] == 0
+        assert reward == pytest.approx(-INVALID_PENALTY)
+        if k + 1 < MAX_REFUSALS:
+            assert not (terminated or truncated)
+            assert not info["action_mask"][view : view + 8].any()  # the place is struck off
+            assert info["unreachable"][-1]["place_m"] == list(places[k + 1])
+    assert truncated and not terminated and "touched the sofa" in info["stopped"]
+    assert info["stopped"].startswith("the robot could not go on")
     with pytest.raises(InputError, match="reset"):
-        env.step(41)
+        env.step(0)
 
 
 def test_the_config_planners_episode_is_batch_surveys_search_run(env, model_cache):
