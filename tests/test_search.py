@@ -296,3 +296,13 @@ def test_a_place_the_base_refuses_is_struck_off_and_the_search_goes_on(
     (entry,) = result["search"]["unreachable"]
     assert entry["view"] == 1 and "laser sees something" in entry["reason"]
     assert math.dist(entry["place_m"], (refused[0].base.x, refused[0].base.y)) < 0.2
+
+
+def test_the_command_lines_planners_are_the_configs():
+    import typing
+
+    from twin.app.config import SearchOptions
+    from twin.app.planner_names import PLANNERS
+
+    hints = typing.get_type_hints(SearchOptions)
+    assert typing.get_args(hints["planner"]) == PLANNERS

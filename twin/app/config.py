@@ -22,6 +22,7 @@ from pathlib import Path
 from typing import Any, Literal
 
 from twin.app.device_types import OPTIONAL_ROLES, ROLES, device_type, types_of
+from twin.app.planner_names import PLANNERS  # noqa: F401 - the config's planner names
 from twin.core.errors import InputError
 from twin.core.fusion import RULES, FusionRule, make_rule
 from twin.core.grid import GridSpec
@@ -123,9 +124,6 @@ class ConfidenceOptions:
     p_absent: float = option(
         0.1, low=0.0, high=0.99, doc="prior probability that an object is not in the mapped area"
     )
-
-
-PLANNERS = ("information", "detection", "coverage", "random", "survey")
 
 
 @dataclass(frozen=True)

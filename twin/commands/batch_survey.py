@@ -11,7 +11,7 @@ import sys
 import time
 from pathlib import Path
 
-from twin.app.config import PLANNERS
+from twin.app.planner_names import PLANNERS
 from twin.commands._args import add_config_arguments, comma_list, numbers
 from twin.commands.montecarlo import add_executor_arguments
 

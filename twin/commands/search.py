@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import argparse
 
-from twin.app.config import PLANNERS
+from twin.app.planner_names import PLANNERS
 from twin.commands.survey import add_run_arguments, run
 
 
