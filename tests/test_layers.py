@@ -104,6 +104,8 @@ RULES = {
         },
         set(),
     ),
+    # the Gymnasium environment: a search mission (twin.app) in the twin's world
+    "twin.envs": ({"twin", "twin.core", "twin.app", "twin.sim"}, set()),
 }
 
 

@@ -134,12 +134,12 @@ class BatchSpec:
         kinds = {d.type for d in config.devices.values()}
         if kinds != {"sim"}:
             raise InputError(
-                f"{self.config_name}: batch-survey runs in the simulation only; "
+                f"{self.config_name}: randomized missions run in the simulation only; "
                 'give every robot device type = "sim"'
             )
         if not any(o.body is not None for o in config.objects):
             raise InputError(
-                f"{self.config_name}: objects: batch-survey scores estimates against a scene "
+                f"{self.config_name}: objects: randomized missions score estimates against a scene "
                 "body; give each object a body"
             )
         return config
