@@ -290,3 +290,19 @@ def test_leg_is_clear_is_exact_against_a_dense_check():
         assert leg_is_clear(bar, a, b, radius, unknown_is_obstacle=False) == (true_gap >= radius)
     assert decided > 350
     assert not leg_is_clear(bar, (0.1, 0.1), (3.0, 0.1), 0.05)  # leaves the map
+
+
+def test_one_search_prices_every_goal_as_plan_would():
+    from twin.nav.planner import PathPlanner
+
+    cells = np.zeros((60, 60))
+    cells[0:50, 29:31] = 1.0  # a wall from the bottom, open at the top
+    planner = PathPlanner(OccupancyMap(cells, 0.05), radius=0.1, margin=0.0)
+    field = planner.distances_from((0.5, 0.5))
+    for goal in ((2.5, 0.5), (0.5, 2.5), (2.2, 2.8)):
+        row, col = (int(v) for v in planner.map.cell_of(*goal))
+        length = planner.plan((0.5, 0.5), goal).length
+        assert length <= field[row, col] + 1e-9 <= 1.09 * length + 0.1  # grid path: an upper bound
+    # a start a hair inside the margin leaves from the nearest free cell; deep inside, nothing
+    assert np.isfinite(planner.distances_from((1.40, 0.5), start_tolerance=0.1)).any()
+    assert np.isinf(planner.distances_from((1.48, 0.5), start_tolerance=0.01)).all()

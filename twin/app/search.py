@@ -397,7 +397,10 @@ class PlaceDistances:
         self._inside = inside
 
     def __call__(self, here: Pose2D) -> np.ndarray:
-        field_m = self.planner.distances_from((here.x, here.y))
+        from twin.app.localization import START_TOLERANCE
+
+        # reachable as the base's own legs are planned: from up to its tolerance off the margin
+        field_m = self.planner.distances_from((here.x, here.y), START_TOLERANCE)
         return np.where(self._inside, field_m[self._rows, self._cols], np.inf)
 
 

@@ -419,22 +419,18 @@ class PathPlanner:
         keep = straighten(self.blocked, np.ascontiguousarray(grid))
         return Path(waypoints=points[keep], cells=cells)
 
-    def distances_from(self, start: Point) -> np.ndarray:
+    def distances_from(self, start: Point, start_tolerance: float = math.inf) -> np.ndarray:
         """(ny, nx) metres along the shortest grid path from ``start`` to every cell of the map
         (inf where the robot cannot go): one search prices every goal at once, e.g. all the
         places a view could be taken from. The grid path is an upper bound of the straightened
         legs' length (by at most ~8 %). A start inside the inflated obstacles (a robot that
-        ended a leg a hair too close) starts from the nearest free cell."""
+        ended a leg a hair too close) starts from the nearest free cell within
+        ``start_tolerance`` metres (as ``plan`` does); farther, nothing is reachable."""
         x, y = _xy(start, "start")
-        row, col = (int(v) for v in self.map.cell_of(x, y))
-        ny, nx = self.map.shape
-        if not (0 <= row < ny and 0 <= col < nx) or self.blocked[row, col]:
-            rows, cols = np.nonzero(~self.blocked)
-            if rows.size == 0:
-                return np.full(self.map.shape, np.inf)
-            cx, cy = self.map.center_of(rows, cols)
-            k = int(np.argmin(np.hypot(cx - x, cy - y)))
-            row, col = int(rows[k]), int(cols[k])
+        try:
+            row, col = self._start_cell((x, y), start_tolerance)
+        except InputError:
+            return np.full(self.map.shape, np.inf)
         return grid_distances(self.blocked, row, col) * self.map.resolution
 
     def leg_is_clear(self, a: Point, b: Point) -> bool:
