@@ -306,3 +306,22 @@ def test_the_command_lines_planners_are_the_configs():
 
     hints = typing.get_type_hints(SearchOptions)
     assert typing.get_args(hints["planner"]) == PLANNERS
+
+
+def test_a_search_not_sure_after_its_views_flies_the_fixed_plan(open_floor):
+    from twin.app.search import FallingBackPlanner
+    from twin.app.survey import PlannedView
+
+    plan = [PlannedView(k, k // 2, Pose2D(1.0 + k, 2.0, 0.0), 0.1 * k) for k in range(4)]
+    planner = FallingBackPlanner(RandomPlanner(open_floor, seed=1), plan, after=3)
+    base = situation(open_floor, None)
+
+    def at(views: int):
+        return planner.choose(Situation(views, *list(vars(base).values())[1:]))
+
+    assert at(2).index >= 0 and at(2).why.startswith("random")
+    for views, k in ((3, 0), (4, 1), (6, 3)):
+        choice = at(views)
+        assert choice.index == -1 and choice.base == plan[k].base and choice.pan == plan[k].pan
+        assert "had not settled after 3 views" in choice.why
+    assert at(7) is None  # the plan is spent: the search stops with no view left

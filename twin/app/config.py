@@ -168,6 +168,12 @@ class SearchOptions:
         "such view: it mostly shows what they showed (the same background, the same "
         "distractor); 1 trusts the belief's independent views",
     )  # fmt: skip
+    survey_after: int = option(
+        16, low=0, high=10000,
+        doc="after this many views not yet sure, the information, detection and coverage "
+        "planners fly the mission's fixed plan for the rest of the budget (0: never): it does "
+        "not depend on a belief that may be wrong",
+    )  # fmt: skip
     temperature: float = option(
         2.0, low=0.01, high=1000.0,
         doc="the confidence's temperature during a search: the views a search chooses return "

@@ -294,22 +294,46 @@ class RandomPlanner:
 
 
 class PlanPlanner:
-    """The mission's fixed plan (``twin.app.survey.plan_views``), view by view."""
+    """The mission's fixed plan (``twin.app.survey.plan_views``), view by view, from the
+    mission's view ``start`` on (0: the plan is the whole search)."""
 
     name = "survey"
 
-    def __init__(self, plan: Sequence[Any]) -> None:
-        self.plan = list(plan)
+    def __init__(self, plan: Sequence[Any], start: int = 0, reason: str = "") -> None:
+        self.plan, self.start, self.reason = list(plan), start, reason
 
     def choose(self, situation: Situation) -> ViewChoice | None:
-        if situation.views_done >= len(self.plan):
+        k = situation.views_done - self.start
+        if not 0 <= k < len(self.plan):
             return None
-        view = self.plan[situation.views_done]
+        view = self.plan[k]
         why = (
-            f"survey: view {view.index + 1} of {len(self.plan)} of the fixed plan "
+            f"survey{self.reason}: view {view.index + 1} of {len(self.plan)} of the fixed plan "
             f"(stop {view.stop + 1})"
         )
         return ViewChoice(-1, view.stop, view.base, view.pan, view.tilt, why)
+
+
+class FallingBackPlanner:
+    """A belief-driven planner for its first ``after`` views, then the fixed plan.
+
+    The belief can be wrong where the detector is weak (a box before a black screen scores
+    little even in view) or a distractor looks like the object from every side: the greedy
+    planner then keeps asking it what it cannot answer. A systematic survey does not depend on
+    the belief, so once ``after`` views have not settled the search, it flies the plan for what
+    is left of the budget. The switch depends on the view count only, so a resumed search
+    switches where the uninterrupted one would have."""
+
+    def __init__(self, planner: Planner, plan: Sequence[Any], after: int) -> None:
+        self.planner, self.after = planner, after
+        self.name = planner.name
+        reason = f" (the belief had not settled after {after} views)"
+        self.fallback = PlanPlanner(plan, after, reason)
+
+    def choose(self, situation: Situation) -> ViewChoice | None:
+        if situation.views_done < self.after:
+            return self.planner.choose(situation)
+        return self.fallback.choose(situation)
 
 
 def view_choice(
@@ -608,6 +632,8 @@ def make_searcher(
             options.planner, candidates, footprints, rates, options.view_time_s, tilt,
             options.repeat_discount,
         )  # fmt: skip
+        if options.survey_after > 0:
+            planner = FallingBackPlanner(planner, plan, options.survey_after)
     inner = getattr(robot.base, "inner", robot.base)  # a localized base wraps the device
     timing = TimeModel(getattr(inner, "limits", BaseLimits()), robot.pantilt.limits)
     rule = StopRule(options.confidence, options.absent, options.max_views, options.max_time_s)

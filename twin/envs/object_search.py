@@ -70,6 +70,8 @@ from twin.core.devices import DeviceError, DeviceFaultError
 from twin.core.errors import InputError
 from twin.core.geometry import Pose2D, wrap_angle
 
+NO_FALLBACK = "search.survey_after=0"  # see ObjectSearchEnv.__init__
+
 OBSERVATIONS = ("scores", "image")
 INVALID_PENALTY = 1.0  # reward lost for an unreachable or already taken view (or a failed drive)
 FOUND_BONUS = 1.0  # reward per object found (declared and within the radius) at the episode's end
@@ -116,6 +118,9 @@ class ObjectSearchEnv(gymnasium.Env):
                 "same place"
             )
         self.observation_mode, self.render_mode = observation, render_mode
+        # An action is a candidate view: the search's fallback to the fixed plan (whose views
+        # are not candidates) is off, so the config's own planner is a policy of this space.
+        overrides = (NO_FALLBACK, *overrides)
         self._spec = BatchSpec.from_config(config, tuple(overrides), vary=tuple(vary))
         self.config = config_ = self._spec.load()
         search = config_.search
