@@ -490,18 +490,7 @@ class RerunRecorder:
             rr.LineStrips2D([path], colors=[110, 170, 255], radii=0.025, draw_order=20.0),
         )
         heading = pose.yaw + record.view.pan
-        log(
-            f"{MAP}/robot",
-            rr.Arrows2D(
-                origins=[[pose.x, pose.y]],
-                vectors=[[0.45 * math.cos(heading), 0.45 * math.sin(heading)]],
-                radii=0.04,
-                colors=[110, 170, 255],
-                labels=["robot"],
-                show_labels=False,
-                draw_order=30.0,
-            ),
-        )
+        self._log_facing(f"{MAP}/robot", pose, heading, 0.45, 0.04, [110, 170, 255], "robot", 30.0)
         if record.truth_pose is not None:
             truth = record.truth_pose
             log(
@@ -558,16 +547,23 @@ class RerunRecorder:
                 ),
             )
         heading = choice.base.yaw + choice.pan
-        log(
-            f"{MAP}/plan/next",
-            rr.Arrows2D(
-                origins=[[choice.base.x, choice.base.y]],
-                vectors=[[0.6 * math.cos(heading), 0.6 * math.sin(heading)]],
-                radii=0.035,
-                colors=[255, 255, 255],
-                labels=["next view"],
+        white = [255, 255, 255]
+        self._log_facing(f"{MAP}/plan/next", choice.base, heading, 0.6, 0.035, white, "next view",
+                         31.0)  # fmt: skip
+
+    def _log_facing(self, path: str, at: Pose2D, heading: float, length: float, radius: float,
+                    colour: list[int], label: str, order: float) -> None:  # fmt: skip
+        """An arrow in the top-down panel: where a camera stands and which way it looks."""
+        self.stream.log(
+            path,
+            self._rr.Arrows2D(
+                origins=[[at.x, at.y]],
+                vectors=[[length * math.cos(heading), length * math.sin(heading)]],
+                radii=radius,
+                colors=colour,
+                labels=[label],
                 show_labels=False,
-                draw_order=31.0,
+                draw_order=order,
             ),
         )
 
