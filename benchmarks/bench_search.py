@@ -67,7 +67,8 @@ def decisions(planner: str, runs: int, seed: int) -> tuple[list[float], list[tup
                     break
                 before = mission.state.robot_time
                 mission.observe(choice)
-                if mission.views_done > 1:  # the first view's clock starts at connection
+                # the first view's clock starts at connection; a plan's views are not priced
+                if mission.views_done > 1 and np.isfinite(choice.seconds):
                     moves.append((choice.seconds, mission.state.robot_time - before))
     finally:
         world.close()
