@@ -125,3 +125,10 @@ def test_novelty_scales_what_a_view_can_still_tell():
     )
     with pytest.raises(InputError, match="novelty"):
         information_gain(prints, cells, 0.05, np.ones(entries + 1))
+
+
+def test_a_views_entries_are_its_rows_cells():
+    dense = np.zeros((3, 2, 3, 3))
+    dense[0, 0, 0, 0] = dense[1, 1, 1, :] = dense[2, 0, 2, 2] = 1.0
+    prints = Footprints.from_dense(list(dense))
+    assert [prints.cells[prints.entries_of(v)].tolist() for v in range(3)] == [[0], [3, 4, 5], [8]]

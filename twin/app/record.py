@@ -666,12 +666,12 @@ class RerunRecorder:
                 axis_y=rrb.ScalarAxis(range=(0.0, 1.0)),
             ),
         ]
-        if scene.planner is not None:  # a search says why it chose each view
-            why = rrb.TextLogView(name=f"why this view ({scene.planner})", origin="plan")
-            plots = rrb.Horizontal(why, *series, column_shares=[3, 1, 1, 1])
-        else:
-            plots = rrb.Horizontal(*series)
+        plots = rrb.Horizontal(*series)
         left = maps[0] if len(maps) == 1 else rrb.Tabs(*maps)
+        if scene.planner is not None:  # a search says why it chose each view, under the map:
+            # the lines are long, and the map's column is the wide one
+            why = rrb.TextLogView(name=f"why this view ({scene.planner})", origin="plan")
+            left = rrb.Vertical(left, why, row_shares=[4, 1])
         return rrb.Blueprint(
             rrb.Horizontal(
                 left,

@@ -37,6 +37,7 @@ import numpy as np
 
 from twin.app.candidates import Candidates, DetectionRates
 from twin.app.mission import Mission
+from twin.app.survey import pan_reach
 from twin.core.confidence import posterior
 from twin.core.devices import BaseLimits, DeviceFaultError, PanTiltLimits
 from twin.core.errors import InputError
@@ -48,7 +49,6 @@ from twin.core.view_gain import (
     unseen_coverage,
 )
 
-PAN_MARGIN = math.radians(5.0)  # stay clear of the head's end stops (as the survey does)
 MAX_REFUSALS = 3  # places refused in a row before a search gives up (the base is in trouble)
 SAME_PLACE = 0.15  # metres: a candidate this close to the robot is reached without driving
 TAKEN_M, TAKEN_RAD = 0.15, math.radians(10.0)  # a logged view this close is that candidate
@@ -74,7 +74,7 @@ class TimeModel:
 
     @property
     def pan_reach(self) -> float:
-        return max(0.0, min(self.head.pan_max, -self.head.pan_min) - PAN_MARGIN)
+        return pan_reach(self.head)
 
     @staticmethod
     def _profile(amount: np.ndarray, speed: float, accel: float) -> np.ndarray:
@@ -211,7 +211,6 @@ class GainPlanner:
         self.name, self.candidates, self.footprints = name, candidates, footprints
         self.rates, self.view_time, self.tilt = rates, view_time, tilt
         self.repeat_discount = repeat_discount
-        self._shares = next(iter(footprints.values())) if footprints else None
         f = candidates.footprints
         # each footprint entry's heading: the direction its cell would be seen from
         rows = np.repeat(np.arange(f.rows), np.diff(f.indptr))
@@ -228,9 +227,9 @@ class GainPlanner:
     def gains(self, situation: Situation) -> np.ndarray:
         """(n_views,) the expected gain of every candidate (nats, probability, or cells)."""
         if self.name == "coverage":
-            if situation.observed is None or self._shares is None:
+            if situation.observed is None:
                 raise InputError("the coverage planner needs the grid's seen counts")
-            return unseen_coverage(self._shares, situation.observed)
+            return unseen_coverage(self.candidates.footprints, situation.observed)
         total = np.zeros(self.candidates.n_views)
         novelty = self.novelty(situation)
         for name, cells in situation.posteriors.items():
@@ -253,8 +252,10 @@ class GainPlanner:
         unit = {"information": "nats", "detection": "P(detect)", "coverage": "cells unseen"}
         x, y = self.candidates.places[self.candidates.place_of(best)]
         heading = math.degrees(self.candidates.heading_of(best))
+        span = self.candidates.footprints.entries_of(best)
+        prints = self.candidates.footprints
         seen = [
-            f"{100 * detection_probability(self.candidates.footprints, cells)[best]:.0f} % of "
+            f"{100 * float(cells.ravel()[prints.cells[span]] @ prints.share[span]):.0f} % of "
             f"{name}'s belief"
             for name, cells in situation.posteriors.items()
         ]
@@ -467,8 +468,7 @@ class Searcher:
             if metres <= TAKEN_M and radians <= TAKEN_RAD:
                 taken[view] = True
             # what it saw, as the nearest candidate would have (for the planner's novelty)
-            rows = np.flatnonzero(f.row_view == view)
-            span = slice(f.indptr[rows[0]], f.indptr[rows[-1] + 1])
+            span = f.entries_of(view)
             np.add.at(repeats[:, view % len(cand.headings)], f.cells[span], f.share[span])
             if not visited or math.hypot(ox - visited[-1][0], oy - visited[-1][1]) > SAME_PLACE:
                 visited.append((ox, oy))
@@ -620,8 +620,6 @@ def make_searcher(
     candidates = search_candidates(config, world, robot.camera.model, planner_map, spans, say)
     rates = {name: detection_rates(m.calibration) for name, m in models.items() if m.calibration}
     footprints = {name: candidates.for_detector(r) for name, r in rates.items()}
-    if not footprints:
-        footprints = {"": candidates.footprints}  # coverage and random need the shares only
     tilt = config.mission.tilt
     if options.planner == "random":
         planner: Planner = RandomPlanner(candidates, options.seed, tilt)

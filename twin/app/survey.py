@@ -41,7 +41,7 @@ def plan_views(mission: MissionConfig, limits: PanTiltLimits) -> list[PlannedVie
     heading within reach), ordered to turn the least; with ``"base"`` the base faces every
     heading with the head straight.
     """
-    reach = min(limits.pan_max, -limits.pan_min) - PAN_MARGIN
+    reach = pan_reach(limits)
     views: list[PlannedView] = []
     yaw = mission.start[2]
     for stop_index, (x, y) in enumerate(mission.stops):
@@ -59,6 +59,12 @@ def plan_views(mission: MissionConfig, limits: PanTiltLimits) -> list[PlannedVie
                 remaining.remove(heading)
             yaw = base_yaw
     return views
+
+
+def pan_reach(limits: PanTiltLimits) -> float:
+    """How far (radians, either way) the head pans for a view: its range less the margin that
+    keeps it off the end stops (0: it cannot pan)."""
+    return max(0.0, min(limits.pan_max, -limits.pan_min) - PAN_MARGIN)
 
 
 def _nearest(headings: Sequence[float], yaw: float) -> float:

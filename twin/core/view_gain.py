@@ -95,6 +95,11 @@ class Footprints:
     def rows(self) -> int:
         return len(self.row_view)
 
+    def entries_of(self, view: int) -> slice:
+        """The entries of one view's rows (they are contiguous): its cells and their shares."""
+        first, last = np.searchsorted(self.row_view, [view, view + 1])
+        return slice(int(self.indptr[first]), int(self.indptr[last]))
+
     @classmethod
     def from_dense(
         cls, views: list[np.ndarray], lift_of: list[np.ndarray] | None = None, floor: float = 1e-6
