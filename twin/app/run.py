@@ -333,11 +333,12 @@ def _fly(config, robot, context, run, resume, started, quiet, on_result) -> dict
             confidence_options=_confidence(config, options),
             views=views,
         )
-    result = _write_results(
-        config, mission, scene, out, options, status, total, setup_time, started
-    )
+    extra = None
     if searcher is not None:
-        result = _search_results(out, result, config, stop_reason, searcher.unreachable)
+        extra = _search_results(config, stop_reason, searcher.unreachable)
+    result = _write_results(
+        config, mission, scene, out, options, status, total, setup_time, started, extra
+    )
     if stopped_by is not None:
         raise stopped_by
     if on_result is not None:
@@ -433,7 +434,9 @@ def _write_results(
     views_planned: int,
     setup_time: float,
     started: float,
+    extra: dict[str, Any] | None = None,
 ) -> dict[str, Any]:
+    """Write the run's results (``extra``: what the mission kind adds, e.g. a search's)."""
     grid = mission.grid
     grid.save(out / "grid.npz")
     mission.views.save(out / VIEWS_FILE)
@@ -472,30 +475,24 @@ def _write_results(
         result["path_length_m"] = round(path_length(planner_map, mission.state.path), 3)
     result["time_s"] = result["robot_time_s"]
     result["mission"] = options.mission
+    result.update(extra or {})
     write_text_atomic(out / RESULT_FILE, json.dumps(json_safe(result), indent=1))
     return result
 
 
 def _search_results(
-    out: Path,
-    result: dict[str, Any],
-    config: SurveyConfig,
-    stop_reason: str | None,
-    unreachable: list[dict[str, Any]],
+    config: SurveyConfig, stop_reason: str | None, unreachable: list[dict[str, Any]]
 ) -> dict[str, Any]:
-    """A search's result adds its planner, why it stopped (None: it did not finish) and the
-    places the base refused to reach this session."""
-    result = {
-        **result,
+    """A search's part of the result: its planner, why it stopped (None: it did not finish)
+    and the places the base refused to reach this session."""
+    return {
         "search": {
             "planner": config.search.planner,
             "stopped": stop_reason,
             "confidence_goal": config.search.confidence,
             "unreachable": unreachable,
-        },
+        }
     }
-    write_text_atomic(out / RESULT_FILE, json.dumps(json_safe(result), indent=1))
-    return result
 
 
 def _place_target_randomly(config: SurveyConfig, context, seed: int) -> None:
