@@ -37,6 +37,7 @@ import numpy as np
 
 from twin.app.candidates import Candidates, DetectionRates
 from twin.app.mission import Mission
+from twin.app.record import ViewRecord
 from twin.app.survey import pan_reach
 from twin.core.confidence import posterior
 from twin.core.devices import BaseLimits, DeviceFaultError, PanTiltLimits
@@ -449,6 +450,7 @@ class Searcher:
         # places the robot could not reach this session, and why (result.json reports them)
         self.unreachable: list[dict[str, Any]] = []
         self._blocked_places: set[int] = set()
+        self._refusals = 0  # places refused in a row
 
     def situation(self) -> Situation:
         mission, cand = self.mission, self.candidates
@@ -497,16 +499,34 @@ class Searcher:
         """Why the search should stop now (see ``stop_reason``), or None to go on."""
         return stop_reason(self.mission, self.rule)
 
-    def run(self, on_view: Callable[[ViewChoice], None] | None = None) -> str:
-        """Take views until a stop reason; returns it.
+    def take(self, choice: ViewChoice) -> ViewRecord | None:
+        """Observe ``choice``; returns its record, or None if the base refused to reach it.
 
         A candidate's place the base refuses to reach (``DeviceFaultError``: no safe path, the
         laser sees something the map does not hold in the way, or a touch its recovery could
-        not get round) is struck off for this session and another view is chosen: a search,
-        unlike a fixed plan, has other places to look from. The base has stopped, backed off
-        and localized again before it refuses, and the refusal is reported (``unreachable``);
-        ``MAX_REFUSALS`` in a row end the search with the error."""
-        refusals = 0
+        not get round) is struck off for this session: a search, unlike a fixed plan, has other
+        places to look from. The base has stopped, backed off and localized again before it
+        refuses, and the refusal is reported (``unreachable``). ``MAX_REFUSALS`` in a row, a
+        refused view of a fixed plan, or any other device error are raised."""
+        try:
+            record = self.mission.observe(choice)
+        except DeviceFaultError as exc:
+            self._refusals += 1
+            if choice.index < 0 or self._refusals >= MAX_REFUSALS:
+                raise
+            place = self.candidates.place_of(choice.index)
+            self._blocked_places.add(place)
+            x, y = (float(v) for v in self.candidates.places[place])
+            self.unreachable.append(
+                {"view": self.mission.views_done, "place_m": [x, y], "reason": str(exc)}
+            )
+            self.mission.say(f"({x:.2f}, {y:.2f}) m not reached, looking elsewhere: {exc}")
+            return None
+        self._refusals = 0
+        return record
+
+    def run(self, on_view: Callable[[ViewChoice], None] | None = None) -> str:
+        """Take views (``take``) until a stop reason; returns it."""
         while True:
             reason = self.stop_reason()
             if reason is not None:
@@ -516,20 +536,7 @@ class Searcher:
                 return f"no view left to take ({self.planner.name})"
             if on_view is not None:
                 on_view(choice)
-            try:
-                self.mission.observe(choice)
-                refusals = 0
-            except DeviceFaultError as exc:
-                refusals += 1
-                if choice.index < 0 or refusals >= MAX_REFUSALS:
-                    raise
-                place = self.candidates.place_of(choice.index)
-                self._blocked_places.add(place)
-                x, y = (float(v) for v in self.candidates.places[place])
-                self.unreachable.append(
-                    {"view": self.mission.views_done, "place_m": [x, y], "reason": str(exc)}
-                )
-                self.mission.say(f"({x:.2f}, {y:.2f}) m not reached, looking elsewhere: {exc}")
+            self.take(choice)
 
 
 # -- wiring ---------------------------------------------------------------------------------------

@@ -30,7 +30,7 @@ truth (the twin knows it). Terminated: every object found or declared absent (``
 truncated: ``max_views`` steps or ``search.max_time_s`` of robot time spent, no valid view left,
 or the robot could not go on. A drive the base refuses (no safe path, something unmapped in the
 way, a touch it could not get round) is penalised like an invalid action and, as
-``Searcher.run`` does, strikes that place off for the episode; ``MAX_REFUSALS`` refusals in a
+``Searcher.take`` does, strikes that place off for the episode; ``MAX_REFUSALS`` refusals in a
 row, or any other device error, end the episode (``twin batch-survey`` counts that run failed).
 
 Seeding: ``reset(seed=s)`` draws one number ``d`` from the env's generator (``info["draw"]``);
@@ -55,7 +55,6 @@ from twin.app.batch import BatchSpec, MissionWorld, ThresholdedDetector, draw_mi
 from twin.app.mission import Mission, estimates
 from twin.app.run import make_grids
 from twin.app.search import (
-    MAX_REFUSALS,
     Searcher,
     Situation,
     make_searcher,
@@ -66,9 +65,9 @@ from twin.app.search import (
 )
 from twin.app.survey import plan_views
 from twin.core.confidence import posterior
-from twin.core.devices import DeviceError, DeviceFaultError
+from twin.core.devices import DeviceError
 from twin.core.errors import InputError
-from twin.core.geometry import Pose2D, wrap_angle
+from twin.core.geometry import wrap_angle
 
 NO_FALLBACK = "search.survey_after=0"  # see ObjectSearchEnv.__init__
 
@@ -145,7 +144,6 @@ class ObjectSearchEnv(gymnasium.Env):
         self._plan = plan_views(config_.mission, world.robot.pantilt.limits)
         self.objects: tuple[str, ...] = self._empty_grids[0].objects
         self._truth: dict[str, tuple[float, float, float]] = {}
-        self._struck: set[int] = set()  # places the base refused to reach this episode
         # A first searcher, on a mission never flown, builds (or loads) the candidate views and
         # checks the config can search (a laser-localized base) before anyone calls reset.
         self._mission: Mission | None = None
@@ -181,7 +179,6 @@ class ObjectSearchEnv(gymnasium.Env):
         self._path_m = 0.0
         self._done = False
         self._fault: str | None = None
-        self._refusals = 0  # places refused in a row
         self._draw = -1
         self._last: dict[str, Any] = {}
 
@@ -234,7 +231,6 @@ class ObjectSearchEnv(gymnasium.Env):
         }
         detector = ThresholdedDetector(world.detector, draw.threshold)
         self._mission = self._new_mission(detector)
-        self._struck = set()
         self._searcher = self._new_searcher(self._mission)
         if self._searcher.candidates.n_views != self.candidates.n_views:
             raise InputError(
@@ -247,7 +243,6 @@ class ObjectSearchEnv(gymnasium.Env):
         self._path_m = 0.0
         self._done = False
         self._fault = None
-        self._refusals = 0
         self._last = {"action": None, "invalid": None, "stopped": None}
         self._situation = self._searcher.situation()
         return self._observation(), self._info()
@@ -277,28 +272,29 @@ class ObjectSearchEnv(gymnasium.Env):
                 self.candidates, situation, view, f"action {view}", self.config.mission.tilt
             )
             try:
-                record = mission.observe(choice)
+                record = self._searcher.take(choice)  # a refused place is struck off there
             except DeviceError as exc:
-                # No view: the robot time spent counts and the step is penalised as an invalid
-                # one. As a search does (Searcher.run), a place the base refuses to reach is
-                # struck off and the episode goes on; MAX_REFUSALS in a row, or any other
-                # device error, end it, as batch-survey counts such a run failed.
+                # The robot cannot go on (MAX_REFUSALS refusals in a row, or another device
+                # error): the episode ends, as batch-survey counts such a run failed.
                 invalid = f"drive failed: {exc}"
-                reward -= (mission.robot.camera.now() - clock) / SECONDS_PER_UNIT
-                self._refusals += 1
-                if isinstance(exc, DeviceFaultError) and self._refusals < MAX_REFUSALS:
-                    self._strike_off(view, exc)
-                else:
-                    self._fault = str(exc)
+                self._fault = str(exc)
             else:
-                self._refusals = 0
-                reward -= (mission.state.robot_time - before) / SECONDS_PER_UNIT
-                self._scores = np.clip(
-                    np.stack([record.column_values[n] for n in self.objects]), 0.0, 1.0
-                ).astype(np.float32)
-                self._frame = record.view.image
-                if len(mission.state.path) >= 2:
-                    self._path_m += path_length(mission.robot.base.planner, mission.state.path[-2:])
+                if record is None:
+                    invalid = f"drive failed: {self._searcher.unreachable[-1]['reason']}"
+                else:
+                    self._scores = np.clip(
+                        np.stack([record.column_values[n] for n in self.objects]), 0.0, 1.0
+                    ).astype(np.float32)
+                    self._frame = record.view.image
+                    if len(mission.state.path) >= 2:
+                        planner = mission.robot.base.planner
+                        self._path_m += path_length(planner, mission.state.path[-2:])
+            # the robot time the step spent: on a view, or on a drive that was refused
+            if invalid is None:
+                spent = mission.state.robot_time - before
+            else:
+                spent = mission.robot.camera.now() - clock
+            reward -= spent / SECONDS_PER_UNIT
         if invalid is not None:
             self._invalid += 1
             reward -= INVALID_PENALTY
@@ -361,27 +357,7 @@ class ObjectSearchEnv(gymnasium.Env):
         searcher = make_searcher(self.config, mission, world.sim.world, self._plan)
         # The env's budget, not the config's, ends an episode (``max_views`` may differ).
         searcher.rule = replace(searcher.rule, max_views=self.max_views, max_time=self.max_time)
-        # A place struck off (see _strike_off) is one the robot cannot reach: the situation,
-        # the mask and the planners see it so, as in Searcher.run.
-        reach, struck = searcher.place_metres, self._struck
-
-        def place_metres(here: Pose2D) -> np.ndarray:
-            metres = np.array(reach(here), dtype=float)
-            metres[list(struck)] = np.inf
-            return metres
-
-        searcher.place_metres = place_metres
         return searcher
-
-    def _strike_off(self, view: int, exc: Exception) -> None:
-        """The base refused to reach view ``view``'s place: unreachable for this episode,
-        reported as a search reports it (``Searcher.unreachable``)."""
-        place = self.candidates.place_of(view)
-        self._struck.add(place)
-        x, y = (float(v) for v in self.candidates.places[place])
-        self._searcher.unreachable.append(
-            {"view": self.mission.views_done, "place_m": [x, y], "reason": str(exc)}
-        )
 
     def _view_index(self, action: Any) -> int:
         try:
