@@ -346,6 +346,12 @@ def test_a_reduced_mission_finds_the_rice_box(reduced_run):
     assert result["status"] == "complete"
     assert result["views"] == result["views_planned"] == 24
     assert box["error_m"] < 0.2
+    # 3-D: the height from the rows its best patches were in, the truth from the twin
+    assert len(box["estimate_m"]) == len(box["truth_m"]) == 3
+    assert box["height_views"] >= 2 and box["height_error_m"] < 0.1
+    assert box["height_error_m"] == pytest.approx(
+        abs(box["estimate_m"][2] - box["truth_m"][2]), abs=2e-4
+    )
     assert box["peak_ratio"] is None or box["peak_ratio"] > 1.1
     assert set(result["timings_s"]) >= {"move", "capture", "detect", "fuse", "record", "total"}
     assert result["robot_time_s"] > 0
@@ -379,7 +385,7 @@ def test_the_grid_as_the_viewer_draws_it_is_brightest_at_the_estimate(reduced_ru
     picture of the grid, not mirrored to the other end of the room."""
     from test_record import brightest, drawn_grids, read_recording
 
-    estimate = read_result(reduced_run)["objects"]["rice_box"]["estimate_m"]
+    estimate = read_result(reduced_run)["objects"]["rice_box"]["estimate_m"][:2]
     pictures = drawn_grids(read_recording(reduced_run / "recording.rrd"), view=23)
     assert {p.kind for p in pictures} == {"DepthImage", "GridMap"}
     for picture in pictures:
@@ -451,8 +457,8 @@ def test_an_interrupted_survey_writes_its_results_and_resumes(
     assert np.corrcoef(resumed.ravel(), straight.ravel())[0, 1] > 0.94
     assert (
         math.dist(
-            result["objects"]["rice_box"]["estimate_m"],
-            read_result(reduced_run)["objects"]["rice_box"]["estimate_m"],
+            result["objects"]["rice_box"]["estimate_m"][:2],
+            read_result(reduced_run)["objects"]["rice_box"]["estimate_m"][:2],
         )
         <= 0.1 + 1e-9
     )
@@ -493,7 +499,7 @@ def test_the_result_says_how_sure_it_is_from_the_calibrated_belief(reduced_run):
     cells, p_absent = posterior(belief.layer("rice_box"), options.temperature, options.p_absent)
     # The grid's own peak, unrounded: a cell 0.2 m from it is in or out by a hair.
     peak = AccumulatorGrid.load(reduced_run / "grid.npz").peaks("rice_box", k=1).best
-    assert math.dist((peak.x, peak.y), box["estimate_m"]) < 1e-3
+    assert math.dist((peak.x, peak.y), box["estimate_m"][:2]) < 1e-3
     within = confidence_within(cells, config.grid.spec, (peak.x, peak.y), options.radius_m)
     assert box["confidence"] == pytest.approx(within, abs=1e-4)
     assert box["p_absent"] == pytest.approx(p_absent, abs=1e-4)
@@ -512,7 +518,7 @@ def test_random_target_placement_moves_the_truth(tmp_path, model_cache):
     argv = survey_argv(out, model_cache, "mission.stops=[[2.5, 3.3]]", "mission.views_per_stop=2")
     assert main([*argv, "--place-target", "random", "--seed", "3"]) == 0
     truth = read_result(out)["objects"]["rice_box"]["truth_m"]
-    assert math.dist(truth, (1.5, 5.0)) > 0.3
+    assert math.dist(truth[:2], (1.5, 5.0)) > 0.3
 
 
 # -- run folders --------------------------------------------------------------------------------

@@ -33,6 +33,7 @@ from twin.core.devices import Robot, View
 from twin.core.errors import TwinError
 from twin.core.geometry import CameraModel, Pose2D
 from twin.core.grid import AccumulatorGrid
+from twin.core.height import best_patch_elevations
 from twin.core.store import write_text_atomic
 from twin.core.visibility import ColumnVisibility
 
@@ -325,13 +326,25 @@ class Mission:
             camera = robot.camera.model
             spans = self.detector.column_spans(view.image.shape[1])
             wedges = camera.wedges(view.pose, view.pan, spans)
+            boxes = self.detector.patch_boxes(view.image.shape)
+            elevations = best_patch_elevations(scores, boxes, camera, view.tilt)
         with self._timed("visibility"):
             seen = self.visibility.profiles(view, camera, spans) if self.visibility else None
         index = state.views_done
         per_object = {name: values[i] for i, name in enumerate(self._names)}
         refusal = self.pose_gate.reason(view.pose_covariance) if self.pose_gate else None
         origin = (view.pose.x, view.pose.y)
-        self.views.append(LoggedView(origin, wedges, per_object, seen, refusal is None))
+        self.views.append(
+            LoggedView(
+                origin,
+                wedges,
+                per_object,
+                seen,
+                refusal is None,
+                {name: elevations[i] for i, name in enumerate(self._names)},
+                self.camera_height,
+            )
+        )
         if refusal is None:
             with self._timed("fuse"):
                 used = seen if self.fuse_visibility else None
@@ -353,7 +366,7 @@ class Mission:
             state.robot_time,
             camera,
             self.camera_height,
-            self.detector.patch_boxes(view.image.shape),
+            boxes,
             {name: scores[i] for i, name in enumerate(self._names)},
             wedges,
             per_object,
@@ -377,8 +390,7 @@ class Mission:
     def result(self, peak_separation: float = 0.5) -> dict[str, Any]:
         """Per object the estimate (and, in the sim, the truth and the error), the views fused,
         the robot time and where the time went (seconds)."""
-        truth = {name: xyz[:2] for name, xyz in self.truth.items()}
-        objects = estimates(self.grid, truth, peak_separation)
+        objects = estimates(self.grid, self.truth, peak_separation, self.views)
         for name, (confidence, p_absent) in self.confidence_details().items():
             objects[name]["confidence"] = round(confidence, 4)
             objects[name]["p_absent"] = round(p_absent, 4)
@@ -440,11 +452,17 @@ def pose_error(state: MissionState) -> dict[str, float] | None:
 
 def estimates(
     grid: AccumulatorGrid,
-    truth: dict[str, tuple[float, float]] | None = None,
+    truth: dict[str, tuple[float, ...]] | None = None,
     min_separation: float = 0.5,
+    views: ViewLog | None = None,
 ) -> dict[str, dict[str, Any]]:
     """Per object: the best peak in metres, its value, the first/second peak ratio, and, when
-    the truth is known (simulation), the truth and the estimate's error in metres."""
+    the truth is known (simulation), the truth and the estimate's error in metres.
+
+    With the mission's ``views``, the estimate is [x, y, z]: z is the object's height from the
+    rows its best patches were found in (``ViewLog.height``; None when no view with rows looks
+    toward the estimate), with ``height_views`` and ``height_spread_m``; a truth with z adds
+    ``height_error_m``. ``error_m`` stays the error in the plan."""
     out: dict[str, dict[str, Any]] = {}
     for name in grid.objects:
         peaks = grid.peaks(name, k=3, min_separation=min_separation)
@@ -457,9 +475,16 @@ def estimates(
                 {"xy_m": [round(p.x, 4), round(p.y, 4)], "value": p.value} for p in peaks.peaks
             ],
         }
+        height = views.height(name, (best.x, best.y)) if views is not None else None
+        if views is not None:
+            entry["estimate_m"].append(None if height is None else round(height.z, 4))
+            entry["height_views"] = 0 if height is None else height.views
+            entry["height_spread_m"] = None if height is None else round(height.spread, 4)
         if truth and name in truth:
-            tx, ty = truth[name]
-            entry["truth_m"] = [round(tx, 4), round(ty, 4)]
+            tx, ty = truth[name][:2]
+            entry["truth_m"] = [round(float(v), 4) for v in truth[name]]
             entry["error_m"] = round(math.hypot(best.x - tx, best.y - ty), 4)
+            if height is not None and len(truth[name]) > 2:
+                entry["height_error_m"] = round(abs(height.z - float(truth[name][2])), 4)
         out[name] = entry
     return out

@@ -465,8 +465,8 @@ def _write_results(
             scene.extent,
             f"{name}: accumulator grid after {mission.views_done} views",
             [(f.name, f.polygon) for f in scene.furniture if f.name not in mission.truth],
-            estimate=tuple(entry["estimate_m"]),
-            truth=tuple(entry["truth_m"]) if "truth_m" in entry else None,
+            estimate=tuple(entry["estimate_m"][:2]),
+            truth=tuple(entry["truth_m"][:2]) if "truth_m" in entry else None,
         )
     planner_map = getattr(mission.robot.base, "planner", None)
     if planner_map is not None:

@@ -21,6 +21,7 @@ import numpy as np
 
 from twin.core.errors import FileFormatError, InputError
 from twin.core.grid import AccumulatorGrid
+from twin.core.height import HeightEstimate, estimate_height
 from twin.core.store import load_arrays, save_arrays
 from twin.core.visibility import ColumnVisibility
 
@@ -32,13 +33,17 @@ VIEW_LOG_VERSION = 1
 class LoggedView:
     """One view: the camera's plan position (m), its columns' bearing intervals (n, 2) in
     radians, each object's n column values, the visibility profiles (or None) and whether the
-    mission fused it (a view whose pose was too uncertain is logged but not fused)."""
+    mission fused it (a view whose pose was too uncertain is logged but not fused); and, for
+    heights (``twin.core.height``), each object's best-patch elevation per column (radians;
+    None in logs written before heights were kept) and the camera's height (m)."""
 
     origin: tuple[float, float]
     wedges: np.ndarray
     values: dict[str, np.ndarray]
     visibility: ColumnVisibility | None
     fused: bool = True
+    elevations: dict[str, np.ndarray] | None = None
+    camera_height: float = 1.0
 
 
 class ViewLog:
@@ -117,6 +122,17 @@ class ViewLog:
             "profile_steps": steps,
             "profile_bins": widths,
             "fused": np.array([v.fused for v in self.views], dtype=bool),
+            "elevations": np.array(
+                [
+                    [
+                        v.elevations[name] if v.elevations else np.full(columns, np.nan)
+                        for name in self.objects
+                    ]
+                    for v in self.views
+                ],
+                dtype=float,
+            ).reshape(n, len(self.objects), columns),
+            "camera_heights": np.array([v.camera_height for v in self.views], dtype=float),
         }
         return save_arrays(path, VIEW_LOG_FORMAT, VIEW_LOG_VERSION, header, arrays)
 
@@ -132,9 +148,13 @@ class ViewLog:
             # Logs written before the reach was kept: every view of a mission had the same.
             widths = arrays.get("profile_bins", np.full(len(steps), profiles.shape[2]))
             n = len(origins)
+            # Logs written before heights were kept have no elevations.
+            elevations = arrays.get("elevations", np.full(values.shape, np.nan))
+            camera_heights = arrays.get("camera_heights", np.ones(n))
             consistent = (
                 wedges.shape[:1] == values.shape[:1] == profiles.shape[:1] == (n,)
-                and len(steps) == len(fused) == len(widths) == n
+                and len(steps) == len(fused) == len(widths) == len(camera_heights) == n
+                and elevations.shape == values.shape
                 and values.shape[1] == len(objects)
                 and bool(np.all(widths <= profiles.shape[2]))
             )
@@ -155,6 +175,29 @@ class ViewLog:
                     {name: values[i, k] for k, name in enumerate(objects)},
                     seen,
                     bool(fused[i]),
+                    None
+                    if np.isnan(elevations[i]).all()
+                    else {name: elevations[i, k] for k, name in enumerate(objects)},
+                    float(camera_heights[i]),
                 )
             )
         return log
+
+    def height(self, name: str, target: tuple[float, float]) -> HeightEstimate | None:
+        """How high object ``name`` stands at plan position ``target`` (m), from the rows its
+        best patches were found in across the fused views (``twin.core.height``); None when
+        no fused view with elevations looks toward it."""
+        views = [v for v in self.views if v.fused and v.elevations is not None]
+        if not views:
+            return None
+        return estimate_height(
+            target,
+            np.array([v.origin for v in views], dtype=float),
+            np.array([v.wedges for v in views], dtype=float),
+            np.array([v.values[name] for v in views], dtype=float),
+            np.array([v.elevations[name] for v in views], dtype=float),
+            np.array([v.camera_height for v in views], dtype=float),
+            [v.visibility.profiles if v.visibility else None for v in views],
+            np.array([v.visibility.step if v.visibility else 0.0 for v in views]),
+            self.max_range,
+        )

@@ -95,15 +95,18 @@ def run(args: argparse.Namespace) -> int:
 
 def print_summary(out: Path, result: dict) -> None:
     for name, entry in result["objects"].items():
-        x, y = entry["estimate_m"]
-        line = f"{name}: estimate ({x:.2f}, {y:.2f}) m, peak {entry['peak']:.2f}"
+        x, y, *z = entry["estimate_m"]
+        height = f", {z[0]:.2f}" if z and z[0] is not None else ""
+        line = f"{name}: estimate ({x:.2f}, {y:.2f}{height}) m, peak {entry['peak']:.2f}"
         ratio = entry["peak_ratio"]
         line += f", first/second peak {ratio:.2f}" if ratio is not None else ""
         if "confidence" in entry:
             line += f", confidence {entry['confidence']:.2f} (absent {entry['p_absent']:.2f})"
         if "error_m" in entry:
-            line += f", truth ({entry['truth_m'][0]:.2f}, {entry['truth_m'][1]:.2f}) m, "
-            line += f"error {entry['error_m']:.2f} m"
+            truth = ", ".join(f"{v:.2f}" for v in entry["truth_m"])
+            line += f", truth ({truth}) m, error {entry['error_m']:.2f} m"
+            if "height_error_m" in entry:
+                line += f" in the plan, {entry['height_error_m']:.2f} m in height"
         print(line)
     if "search" in result:
         search = result["search"]

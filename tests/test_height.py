@@ -1,0 +1,171 @@
+"""An object's height from its best patch rows (twin.core.height) and the view log that keeps
+them."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from twin.app.view_log import LoggedView, ViewLog
+from twin.core.errors import InputError
+from twin.core.geometry import CameraModel
+from twin.core.height import (
+    best_patch_elevations,
+    estimate_height,
+    pixel_elevations,
+    weighted_median,
+)
+from twin.rfch.params import PatchGrid
+
+CAMERA = CameraModel()  # 320 x 240, 45 degrees
+
+
+def project(camera: CameraModel, point: np.ndarray, height: float, tilt: float):
+    """Pixel (u, v) of a point (ahead, left, z) in metres for a camera ``height`` up, tilted by
+    ``tilt``: written independently of the module, as a rotation of the point into the camera."""
+    ahead, left, z = point
+    rise = z - height
+    c, s = math.cos(tilt), math.sin(tilt)
+    forward, up = ahead * c + rise * s, -ahead * s + rise * c
+    f = camera.focal_px
+    return camera.width / 2 - f * left / forward, camera.height / 2 - f * up / forward
+
+
+@pytest.mark.parametrize("tilt_deg", [0.0, -20.0, 15.0])
+def test_the_ray_through_a_pixel_rises_to_the_point_it_shows(tilt_deg):
+    tilt = math.radians(tilt_deg)
+    rng = np.random.default_rng(1)
+    for _ in range(50):
+        point = np.array([rng.uniform(1.0, 5.0), rng.uniform(-1.0, 1.0), rng.uniform(0.0, 2.0)])
+        u, v = project(CAMERA, point, 1.0, tilt)
+        if not (0 <= u < CAMERA.width and 0 <= v < CAMERA.height):
+            continue
+        elevation = pixel_elevations(CAMERA, np.array(u), np.array(v), tilt)
+        expected = math.atan2(point[2] - 1.0, math.hypot(point[0], point[1]))
+        assert float(elevation) == pytest.approx(expected, abs=1e-9)
+
+
+def test_the_image_centre_looks_along_the_tilt():
+    for tilt in (-0.4, 0.0, 0.3):
+        assert float(pixel_elevations(CAMERA, np.array(160.0), np.array(120.0), tilt)) == (
+            pytest.approx(tilt)
+        )
+
+
+def test_a_tilt_beyond_vertical_is_refused():
+    with pytest.raises(InputError, match="tilt"):
+        pixel_elevations(CAMERA, np.array(1.0), np.array(1.0), 2.0)
+
+
+def test_a_bump_over_two_rows_has_its_centre_between_them():
+    boxes = PatchGrid().boxes((240, 320, 3))
+    rows, cols = boxes.shape[:2]
+    scores = np.full((1, rows, cols), 0.1)
+    scores[0, 5, 3] = scores[0, 6, 3] = 0.8  # an object between rows 5 and 6 of column 3
+    scores[0, 9, 7] = 0.9  # and one wholly in row 9 of column 7
+    elevations = best_patch_elevations(scores, boxes, CAMERA, 0.0)
+    v_between = 0.5 * (boxes[5, 3, 1] + boxes[6, 3, 3])
+    u3 = 0.5 * (boxes[0, 3, 0] + boxes[0, 3, 2])
+    u7 = 0.5 * (boxes[0, 7, 0] + boxes[0, 7, 2])
+    v9 = 0.5 * (boxes[9, 7, 1] + boxes[9, 7, 3])
+    assert elevations[0, 3] == pytest.approx(pixel_elevations(CAMERA, u3, v_between, 0.0))
+    assert elevations[0, 7] == pytest.approx(pixel_elevations(CAMERA, u7, v9, 0.0))
+
+
+def test_scores_that_do_not_fit_the_patch_grid_are_refused():
+    boxes = PatchGrid().boxes((240, 320, 3))
+    with pytest.raises(InputError, match="patch grid"):
+        best_patch_elevations(np.zeros((1, 3, 3)), boxes, CAMERA, 0.0)
+
+
+def test_weighted_median_follows_the_weights():
+    values = np.array([0.0, 1.0, 10.0])
+    assert weighted_median(values, np.array([1.0, 1.0, 1.0])) == 1.0
+    assert weighted_median(values, np.array([1.0, 1.0, 5.0])) == 10.0
+
+
+def views_of(target, z, rng, n=12, noise=0.01, liars=3):
+    """n views looking at an object at ``target`` standing ``z`` high: each view's column toward
+    it stands out and its elevation is the truth plus noise; ``liars`` views see nothing there
+    (a plain column) and give random elevations."""
+    origins, wedges, values, elevations = [], [], [], []
+    for i in range(n):
+        angle = 2 * math.pi * i / n
+        distance = rng.uniform(1.5, 4.0)
+        origin = (target[0] + distance * math.cos(angle), target[1] + distance * math.sin(angle))
+        axis = angle + math.pi  # looking at the target
+        edges = axis + np.linspace(0.4, -0.4, 9)
+        wedge = np.stack([edges[1:], edges[:-1]], axis=1)
+        value = np.full(8, 0.2)
+        elevation = rng.uniform(-0.3, 0.3, 8)
+        if i >= liars:
+            value[3] = value[4] = 0.9
+            truth = math.atan2(z - 1.0, distance) + rng.normal(0, noise)
+            elevation[3] = elevation[4] = truth
+        origins.append(origin)
+        wedges.append(wedge)
+        values.append(value)
+        elevations.append(elevation)
+    return np.array(origins), np.array(wedges), np.array(values), np.array(elevations)
+
+
+def test_the_height_is_the_one_the_views_that_see_the_object_agree_on():
+    rng = np.random.default_rng(7)
+    target, z = (2.0, 3.0), 0.62
+    origins, wedges, values, elevations = views_of(target, z, rng)
+    found = estimate_height(target, origins, wedges, values, elevations, np.ones(len(origins)))
+    assert found is not None
+    assert found.z == pytest.approx(z, abs=0.03)
+    assert found.views == len(origins) - 3  # plain columns do not vote
+    assert found.spread < 0.05
+
+
+def test_views_out_of_range_or_looking_away_do_not_vote():
+    rng = np.random.default_rng(8)
+    target = (2.0, 3.0)
+    origins, wedges, values, elevations = views_of(target, 0.5, rng, liars=0)
+    heights = np.ones(len(origins))
+    none = estimate_height(target, origins, wedges, values, elevations, heights, max_range=1.0)
+    assert none is None
+    away = estimate_height((40.0, 40.0), origins, wedges, values, elevations, heights)
+    assert away is None
+
+
+def test_a_view_the_visibility_says_could_not_see_there_does_not_vote():
+    rng = np.random.default_rng(9)
+    target, z = (2.0, 3.0), 1.4
+    origins, wedges, values, elevations = views_of(target, z, rng, liars=0)
+    elevations[:6] = -0.5  # these six claim the floor ...
+    profiles = [np.ones((8, 100)) for _ in range(len(origins))]
+    for i in range(6):
+        profiles[i][:] = 0.0  # ... but could not have seen an object there
+    steps = np.full(len(origins), 0.05)
+    heights = np.ones(len(origins))
+    found = estimate_height(target, origins, wedges, values, elevations, heights, profiles, steps)
+    assert found is not None and found.views == len(origins) - 6
+    assert found.z == pytest.approx(z, abs=0.03)
+
+
+def test_the_view_log_keeps_elevations_and_reads_logs_without_them(tmp_path):
+    rng = np.random.default_rng(10)
+    target, z = (2.0, 3.0), 0.9
+    origins, wedges, values, elevations = views_of(target, z, rng)
+    log = ViewLog(["box"], None)
+    for i in range(len(origins)):
+        log.append(
+            LoggedView(
+                tuple(origins[i]), wedges[i], {"box": values[i]}, None, True,
+                {"box": elevations[i]}, 1.0,
+            )
+        )  # fmt: skip
+    log.save(tmp_path / "views.npz")
+    again = ViewLog.load(tmp_path / "views.npz")
+    assert again.height("box", target) == log.height("box", target)
+    assert log.height("box", target).z == pytest.approx(z, abs=0.03)
+    old = ViewLog(["box"], None)
+    for view in log.views:
+        old.append(LoggedView(view.origin, view.wedges, view.values, None, True))
+    old.save(tmp_path / "old.npz")
+    assert ViewLog.load(tmp_path / "old.npz").height("box", target) is None
