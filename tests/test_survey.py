@@ -392,6 +392,18 @@ def test_the_grid_as_the_viewer_draws_it_is_brightest_at_the_estimate(reduced_ru
         assert math.dist(brightest(picture), estimate) < 0.15, picture.entity
 
 
+def test_the_viewer_shows_the_estimate_at_its_height(reduced_run):
+    """In the 3-D view the estimate is drawn where the result says the object is, at its
+    height, not on the floor."""
+    from test_record import read_recording
+
+    box = read_result(reduced_run)["objects"]["rice_box"]
+    rec = read_recording(reduced_run / "recording.rrd")
+    drawn = rec.latest("/world/estimate/rice_box", "Points3D:positions", 23)
+    assert drawn is not None
+    assert np.allclose(np.asarray(drawn[0], dtype=float), box["estimate_m"], atol=2e-3)
+
+
 def test_ctrl_c_while_serving_the_results_stops_the_server_and_exits_130(tmp_path, model_cache):
     out = tmp_path / "run"
     sets = ("mission.stops=[[2.5, 3.3]]", "mission.views_per_stop=2")

@@ -377,6 +377,7 @@ class Mission:
             tuple((x, y, yaw) for x, y, yaw in state.truth_path),
             seen,
             self.confidences(),
+            self.heights(),
         )
         with self._timed("record"):
             self.recorder.log_view(record, self.grid)
@@ -422,6 +423,16 @@ class Mission:
             )
             within = confidence_within(cells, self.belief.spec, (best.x, best.y), options.radius_m)
             out[name] = (float(within), float(p_absent))
+        return out
+
+    def heights(self, peak_separation: float = 0.5) -> dict[str, float]:
+        """Per object its height (m) at the grid's best peak, where the views tell it."""
+        out = {}
+        for name in self._names:
+            best = self.grid.peaks(name, k=1, min_separation=peak_separation).best
+            height = self.views.height(name, (best.x, best.y))
+            if height is not None:
+                out[name] = height.z
         return out
 
     def confidences(self) -> dict[str, float]:

@@ -96,6 +96,8 @@ class ViewRecord:
     truth_path: tuple[tuple[float, float, float], ...] = ()  # simulation: the true poses so far
     visibility: ColumnVisibility | None = None  # what each column could have seen, if modelled
     confidence: dict[str, float] = field(default_factory=dict)  # object -> P(within radius)
+    # object -> its height (m) at the grid's best peak (twin.core.height); absent: unknown
+    heights: dict[str, float] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)
@@ -520,7 +522,7 @@ class RerunRecorder:
         for name, values in record.column_values.items():
             self._log_wedges(name, (pose.x, pose.y), record.wedges, values)
         for name in grid.objects:
-            self._log_grid(name, grid)
+            self._log_grid(name, grid, record.heights.get(name))
         for name, confidence in record.confidence.items():
             log(f"plots/confidence/{name}", rr.Scalars(confidence))
 
@@ -956,7 +958,7 @@ class RerunRecorder:
             rr.Mesh3D(vertex_positions=vertices, vertex_colors=colors, triangle_indices=triangles),
         )
 
-    def _log_grid(self, name: str, grid: AccumulatorGrid) -> None:
+    def _log_grid(self, name: str, grid: AccumulatorGrid, height: float | None = None) -> None:
         rr, log = self._rr, self.stream.log
         layer = grid.layer(name)
         scale = self._scales[name]
@@ -989,11 +991,21 @@ class RerunRecorder:
         )
         peaks = grid.peaks(name, k=2, min_separation=self._peak_separation)
         best = peaks.best
+        # In 3-D the estimate stands at its height (twin.core.height), on a stalk from the
+        # floor so that its place on the plan reads too; on the floor while it is unknown.
+        z = 0.05 if height is None else height
         log(
             f"world/estimate/{name}",
             rr.Points3D(
-                [[best.x, best.y, 0.05]], radii=0.08, colors=[255, 255, 255], labels=["estimate"]
+                [[best.x, best.y, z]],
+                radii=0.08,
+                colors=[255, 255, 255],
+                labels=["estimate" if height is None else f"estimate, {height:.2f} m up"],
             ),
+        )
+        log(
+            f"world/estimate/{name}/stalk",
+            rr.LineStrips3D([[[best.x, best.y, 0.0], [best.x, best.y, z]]], radii=0.01),
         )
         # A hollow square around the estimate's cell, so that the cell itself stays visible.
         half = ESTIMATE_SQUARE
