@@ -269,3 +269,20 @@ def test_the_calibrated_rule_waits_for_the_models_and_refuses_one_without_calibr
         load_config(None, overrides=["grid.direction_bins=0"])
     with pytest.raises(ConfigError, match=r"grid.direction_bins: expected 1 \(off\) to 64"):
         load_config(None, overrides=["grid.direction_bins=65"])
+
+
+def test_the_grid_covers_the_scene_unless_told_otherwise(tmp_path):
+    """A config that leaves the extent to the scene gets the scene's floor; a given extent
+    wins; a scene without a floor to read is refused in one line that says what to give."""
+    spec = load_config(None).grid.spec
+    assert (spec.x_min, spec.y_min, spec.x_max, spec.y_max) == (0.0, 0.0, 4.5, 6.0)
+    told = load_config(None, overrides=["grid.extent=[1.0, 1.0, 3.0, 4.0]"])
+    assert (told.grid.spec.x_min, told.grid.spec.y_max) == (1.0, 4.0)
+    stage = load_config(None, overrides=['scene.file="training_stage.xml"'])
+    assert (stage.grid.spec.x_min, stage.grid.spec.x_max) == (-5.0, 5.0)  # the stage's floor
+    bare = tmp_path / "bare.xml"
+    bare.write_text('<mujoco><worldbody><geom type="sphere" size="1"/></worldbody></mujoco>')
+    with pytest.raises(ConfigError) as caught:
+        load_config(None, overrides=[f'scene.file="{bare}"'])
+    message = str(caught.value)
+    assert "grid.extent" in message and "floor" in message and "\n" not in message

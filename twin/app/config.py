@@ -13,6 +13,7 @@ the shipped default, ``scenes/living_room_survey.toml``, runs the paper's missio
 
 from __future__ import annotations
 
+import functools
 import json
 import math
 import tomllib
@@ -481,7 +482,7 @@ def parse_config(
 
     devices = _devices(root.table("robot"))
     mission = _mission(root.table("mission"))
-    grid = _grid(root.table("grid"))
+    grid = _grid(root.table("grid"), scene)
     twins = root.table("serial_twins", required=False)
     time_scale = twins.number("time_scale", 1.0, lambda v: 0.0 < v <= 20.0, "a factor in (0, 20]")
     twins.finish()
@@ -649,8 +650,19 @@ def _mission(table: _Table) -> MissionConfig:
     )
 
 
-def _grid(table: _Table) -> GridConfig:
-    extent = table.numbers("extent", 4, "[x_min, y_min, x_max, y_max] in metres")
+def _grid(table: _Table, scene: Path) -> GridConfig:
+    extent_value = table.get("extent", "scene")
+    if extent_value == "scene":
+        try:
+            extent = scene_extent(scene)
+        except InputError as exc:
+            raise table.fail(
+                "extent", f"{exc}; give the grid's [x_min, y_min, x_max, y_max] in metres"
+            ) from None
+    else:
+        extent = table.numbers(
+            "extent", 4, '[x_min, y_min, x_max, y_max] in metres, or "scene"', extent_value
+        )
     cell = table.number("cell_size", 0.1, lambda v: v > 0.0, "a positive size in metres")
     try:
         spec = GridSpec(*extent, cell)
@@ -689,6 +701,20 @@ def _grid(table: _Table) -> GridConfig:
     # The calibrated rule's log-likelihood ratios come with the detector's models.
     rule = None if fusion == "calibrated" else make_rule(fusion, **params)
     return GridConfig(spec, supersample, rule, max_range, separation, fusion, bins, **switches)
+
+
+def scene_extent(scene: Path) -> tuple[float, float, float, float]:
+    """(x_min, y_min, x_max, y_max) of the scene's floor in metres: the grid's extent when the
+    config leaves it to the scene, so a new scene needs no numbers copied into its config."""
+    resolved = scene.resolve()
+    return _scene_extent(str(resolved), resolved.stat().st_mtime_ns)
+
+
+@functools.lru_cache(maxsize=16)
+def _scene_extent(path: str, mtime_ns: int) -> tuple[float, float, float, float]:
+    from twin.sim.world import World  # MuJoCo: only for configs that ask the scene
+
+    return World(path).room_bounds()
 
 
 def _detector(table: _Table) -> dict[str, Any]:
