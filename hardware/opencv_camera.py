@@ -20,6 +20,7 @@ import numpy as np
 from twin.core.clock import SYSTEM_CLOCK, Clock
 from twin.core.devices import Camera, ConnectionLostError, DeviceError, DeviceTimeoutError, Frame
 from twin.core.geometry import CameraModel
+from twin.core.lens import Lens
 
 # How many buffered frames to discard before the one we keep (V4L2 keeps up to 4).
 STALE_FRAMES = 2
@@ -29,8 +30,10 @@ class OpenCVCamera(Camera):
     """``device``: an index (0 = /dev/video0), a device path, a URL, or a video file.
 
     ``reconnect_delay`` and ``read_timeout`` are seconds of ``clock``, which also stamps the
-    frames. OpenCV's own open and read timeouts are real milliseconds inside the backend; the
-    driver measures a grab on its clock and calls one longer than four read timeouts stuck."""
+    frames. ``lens``: the calibrated intrinsics and distortion, which the camera's model then
+    carries (so wedges are computed through them) instead of the nominal ``hfov``. OpenCV's own
+    open and read timeouts are real milliseconds inside the backend; the driver measures a grab
+    on its clock and calls one longer than four read timeouts stuck."""
 
     def __init__(
         self,
@@ -43,10 +46,16 @@ class OpenCVCamera(Camera):
         reconnect_delay: float = 0.5,
         read_timeout: float = 2.0,
         clock: Clock = SYSTEM_CLOCK,
+        lens: Lens | None = None,
     ) -> None:
         self.device, self.clock = device, clock
         self.name = f"{name} {device}"
-        self._model = CameraModel(width, height, hfov)
+        # a calibrated lens (``twin calibrate``) replaces the nominal field of view
+        self._model = (
+            CameraModel(width, height, hfov)
+            if lens is None
+            else CameraModel.with_lens(width, height, lens)
+        )
         self.reconnect_attempts = reconnect_attempts
         self.reconnect_delay = reconnect_delay
         self.read_timeout = read_timeout

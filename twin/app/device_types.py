@@ -22,13 +22,83 @@ OPTIONAL_ROLES = ("laser",)  # a robot may have one; localizing by laser needs i
 # -- the twin ----------------------------------------------------------------------------------
 
 
+LENS_DOCS = {
+    "intrinsics": "[fx, fy, cx, cy] in pixels (OpenCV's convention: pixel centres at whole "
+    "numbers), as `twin calibrate` writes them",
+    "distortion": "[k1, k2, p1, p2, k3], OpenCV's radial-tangential coefficients, as `twin "
+    "calibrate` writes them",
+}
+
+
 @dataclass(frozen=True)
 class SimCameraOptions:
-    """The head camera rendered by MuJoCo. Its vertical field of view is the MJCF camera's, so
-    the horizontal one follows from the aspect (320 x 240 gives the paper's 45 degrees)."""
+    """The head camera rendered by MuJoCo, as imperfect as the VC-C4 by default (``effects =
+    "realistic"``: its wide-end lens with barrel distortion, auto exposure and white balance,
+    sensor and analog noise, motion blur, JPEG; see twin.sim.camera_effects for where each
+    default comes from). ``effects = "ideal"`` is the plain pinhole render: its vertical field
+    of view is the MJCF camera's, so the horizontal one follows from the aspect (320 x 240 gives
+    the paper's 45 degrees), and every other option below is ignored."""
 
     width: int = option(320, unit="px", low=16, high=1920, doc="image width")
     height: int = option(240, unit="px", low=16, high=1080, doc="image height")
+    effects: Literal["realistic", "ideal"] = option(
+        "realistic", doc='"ideal" turns every effect off (the plain renderer, bit for bit)'
+    )
+    hfov_deg: float = option(
+        47.5,
+        unit="deg",
+        low=10.0,
+        high=120.0,
+        doc="the true lens's horizontal field across the frame (VC-C4 wide end: 47.5)",
+    )
+    lens_distortion: tuple[float, float, float, float, float] = option(
+        (-0.20, 0.03, 5e-4, -3e-4, 0.0),
+        low=-1.0,
+        high=1.0,
+        doc="the true lens's [k1, k2, p1, p2, k3] (typical of a 1/4-inch zoom's wide end)",
+    )
+    lens_centre_offset: tuple[float, float] = option(
+        (2.1, -1.4),
+        unit="px",
+        low=-20.0,
+        high=20.0,
+        doc="the true principal point minus the image centre, [x, y], pixels at 320 wide",
+    )
+    lens_model: Literal["true", "calibrated"] = option(
+        "true",
+        doc='the lens the mission computes wedges with: the true one, or "calibrated" (the '
+        "intrinsics and distortion below, from `twin calibrate`)",
+    )
+    intrinsics: tuple[float, ...] | None = option(None, doc=LENS_DOCS["intrinsics"])
+    distortion: tuple[float, ...] | None = option(None, doc=LENS_DOCS["distortion"])
+    motion_blur: bool = option(True, doc="blur frames by the head's and base's turning")
+    exposure_ms: float = option(
+        1000.0 / 60.0, unit="ms", low=0.1, high=200.0, doc="exposure time (an NTSC field)"
+    )
+    auto_exposure: bool = option(True, doc="a lagging gain toward a target mean, clipping")
+    exposure_target: float = option(
+        0.45, low=0.05, high=0.95, doc="mean brightness the auto exposure aims at (of full scale)"
+    )
+    exposure_time_constant_s: float = option(
+        0.3, unit="s", low=0.0, high=10.0, doc="how fast the auto exposure follows the scene"
+    )
+    white_balance: bool = option(True, doc="grey-world gains that converge with a lag")
+    white_balance_time_constant_s: float = option(
+        1.0, unit="s", low=0.0, high=30.0, doc="how fast the white balance follows the scene"
+    )
+    white_balance_cast: tuple[float, float] = option(
+        (1.03, 0.97), low=0.5, high=2.0, doc="[red, blue] gains the balance leaves over"
+    )
+    noise: bool = option(True, doc="shot and read noise, amplified by the exposure gain")
+    read_noise_dn: float = option(
+        1.0, unit="DN", low=0.0, high=50.0, doc="read noise, 1 sigma, at gain 1"
+    )
+    shot_noise_dn: float = option(
+        0.02, unit="DN", low=0.0, high=5.0, doc="shot noise variance per DN of signal"
+    )
+    analog: bool = option(True, doc="composite video's narrow chroma (colour blurred 3 px)")
+    jpeg_quality: int = option(80, low=0, high=100, doc="JPEG quality; 0: no JPEG")
+    effects_seed: int = option(0, low=0, doc="seed of the camera's noise")
 
 
 @dataclass(frozen=True)
@@ -84,7 +154,15 @@ class OpenCVCameraOptions:
     device: int | str = option(0, doc="camera index, device path, video file or stream URL")
     width: int = option(320, unit="px", low=16, high=4096, doc="frame width delivered")
     height: int = option(240, unit="px", low=16, high=4096, doc="frame height delivered")
-    hfov_deg: float = option(45.0, unit="deg", low=1.0, high=179.0, doc="horizontal field of view")
+    hfov_deg: float = option(
+        45.0,
+        unit="deg",
+        low=1.0,
+        high=179.0,
+        doc="horizontal field of view (ignored once intrinsics are given)",
+    )
+    intrinsics: tuple[float, ...] | None = option(None, doc=LENS_DOCS["intrinsics"])
+    distortion: tuple[float, ...] | None = option(None, doc=LENS_DOCS["distortion"])
     reconnect_attempts: int = option(3, low=0, high=100, doc="reopen tries after a lost camera")
 
 

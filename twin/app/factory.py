@@ -18,10 +18,14 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from twin.app.config import TWIN_PORT, DeviceConfig, SurveyConfig
+import numpy as np
+
+from twin.app.config import TWIN_PORT, ConfigError, DeviceConfig, SurveyConfig
 from twin.app.device_types import device_type
 from twin.core.devices import Device, LaserMount, Robot
+from twin.core.errors import InputError
 from twin.core.geometry import CameraModel, Pose2D
+from twin.core.lens import Lens
 
 if TYPE_CHECKING:
     from twin.sim.robot import SimRobot
@@ -106,8 +110,90 @@ class BuildContext:
 def sim_camera(device: DeviceConfig, context: BuildContext) -> Device:
     from twin.sim.robot import SimCamera
 
-    options = device.options
-    return SimCamera(context.sim, _sim_camera_model(context.sim, options.width, options.height))
+    o = device.options
+    model, effects = sim_camera_parts(o, context.sim)
+    return SimCamera(context.sim, model, effects=effects, seed=o.effects_seed)
+
+
+def sim_camera_parts(options: Any, sim: SimRobot) -> tuple[CameraModel, Any]:
+    """The sim camera's ``CameraModel`` (what the mission computes wedges with) and its
+    ``twin.sim.camera_effects.CameraEffects`` (None for ``effects = "ideal"``), from its
+    ``SimCameraOptions``. Public so that frames rendered elsewhere (a detector's calibration
+    views) can go through the same camera."""
+    o = options
+    if o.effects == "ideal":
+        return _sim_camera_model(sim, o.width, o.height), None
+    from twin.sim.camera_effects import CameraEffects, EffectSettings, lens_for_field
+
+    true_lens = lens_for_field(
+        o.width, o.height, math.radians(o.hfov_deg), o.lens_distortion, o.lens_centre_offset
+    )
+    settings = EffectSettings(
+        lens=true_lens,
+        motion_blur=o.motion_blur,
+        exposure_s=o.exposure_ms / 1000.0,
+        auto_exposure=o.auto_exposure,
+        exposure_target=o.exposure_target,
+        exposure_time_constant_s=o.exposure_time_constant_s,
+        white_balance=o.white_balance,
+        white_balance_time_constant_s=o.white_balance_time_constant_s,
+        white_balance_cast=o.white_balance_cast,
+        noise=o.noise,
+        read_noise_dn=o.read_noise_dn,
+        shot_noise_dn=o.shot_noise_dn,
+        analog=o.analog,
+        jpeg_quality=o.jpeg_quality,
+    )
+    lens = true_lens
+    if o.lens_model == "calibrated":
+        lens = configured_lens("sim camera", o.width, o.height, o.intrinsics, o.distortion)
+        if lens is None:
+            raise ConfigError(
+                'sim camera: lens_model = "calibrated" needs intrinsics and distortion in '
+                '[robot.camera]; run `twin calibrate --config ...` or set lens_model = "true"'
+            )
+    return CameraModel.with_lens(o.width, o.height, lens), CameraEffects(
+        settings, o.width, o.height
+    )
+
+
+def configured_lens(
+    device: str,
+    width: int,
+    height: int,
+    intrinsics: tuple[float, ...] | None,
+    distortion: tuple[float, ...] | None,
+) -> Lens | None:
+    """The lens a camera table's ``intrinsics``/``distortion`` give (None if neither is set);
+    a ``ConfigError`` naming ``device`` and the remedy if they are incomplete or do not fit a
+    ``width`` x ``height`` image."""
+    if intrinsics is None and distortion is None:
+        return None
+    remedy = "run `twin calibrate --config ...` to write both, or remove them"
+    if intrinsics is None or distortion is None:
+        given = "intrinsics" if intrinsics is not None else "distortion"
+        raise ConfigError(f"{device}: [robot.camera] has {given} but not both; {remedy}")
+    if len(intrinsics) != 4 or len(distortion) != 5:
+        raise ConfigError(
+            f"{device}: intrinsics must be [fx, fy, cx, cy] and distortion [k1, k2, p1, p2, k3],"
+            f" got {len(intrinsics)} and {len(distortion)} numbers; {remedy}"
+        )
+    fx, fy, cx, cy = intrinsics
+    if fx <= 0 or fy <= 0 or not (0 <= cx < width and 0 <= cy < height):
+        raise ConfigError(
+            f"{device}: intrinsics {list(intrinsics)} do not fit a {width}x{height} image "
+            f"(calibrated at another size?); {remedy}"
+        )
+    lens = Lens.from_lists(intrinsics, distortion)
+    try:  # the whole frame must undistort (the polynomial folds back far outside its data)
+        CameraModel.with_lens(width, height, lens).pixel_rays(
+            np.array([0.0, width, 0.0, width]), np.array([0.0, 0.0, height, height])
+        )
+    except InputError as exc:
+        raise ConfigError(
+            f"{device}: the distortion cannot be inverted over the frame; {remedy}"
+        ) from exc
+    return lens
 
 
 def _sim_camera_model(sim: SimRobot, width: int, height: int) -> CameraModel:
@@ -147,6 +233,9 @@ def opencv_camera(device: DeviceConfig, context: BuildContext) -> Device:
         o.height,
         math.radians(o.hfov_deg),
         reconnect_attempts=o.reconnect_attempts,
+        lens=configured_lens(
+            f"opencv camera {o.device}", o.width, o.height, o.intrinsics, o.distortion
+        ),
     )
 
 

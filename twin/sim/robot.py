@@ -37,6 +37,7 @@ from twin.core.devices import (
 )
 from twin.core.errors import InputError
 from twin.core.geometry import CameraModel, Pose2D
+from twin.sim.camera_effects import CameraEffects
 from twin.sim.drive import (
     DiffDriveGeometry,
     GoToController,
@@ -487,17 +488,42 @@ class SimCamera(_SimDevice, Camera):
     Each frame carries its depth (metres along each pixel's ray, NaN where nothing is within
     range) for the visibility model, unless ``depth`` is False: a depth pass costs another
     render, which runs that need no visibility (or stand in for a real camera) can skip.
+
+    ``effects`` makes the camera as imperfect as the VC-C4 (``twin.sim.camera_effects``): with
+    a lens, each frame is rendered undistorted at the effects' wider canvas and bent through the
+    lens (colour and depth alike), then exposed, balanced, noised, blurred by the head's and
+    base's turning and JPEG-coded, seeded by ``seed``. ``model`` is what the mission believes
+    the camera is (the true lens, or a calibrated one). Without effects (or with
+    ``EffectSettings.ideal()``) frames are exactly the plain renderer's.
     """
 
     name = "sim camera"
 
     def __init__(
-        self, robot: SimRobot, model: CameraModel = PAPER_CAMERA, *, depth: bool = True
+        self,
+        robot: SimRobot,
+        model: CameraModel = PAPER_CAMERA,
+        *,
+        depth: bool = True,
+        effects: CameraEffects | None = None,
+        seed: int = 0,
     ) -> None:
         super().__init__(robot)
         self.depth = depth
+        if effects is not None and effects.settings.is_ideal:
+            effects = None
+        if effects is not None and (effects.width, effects.height) != (model.width, model.height):
+            raise InputError(
+                f"sim camera: effects are for {effects.width}x{effects.height} frames but the "
+                f"camera model is {model.width}x{model.height}; build both for one size"
+            )
+        self.effects = effects
+        self.seed = seed
+        self._rng = np.random.default_rng(seed)
+        self._last_grab: float | None = None
         fovy = float(robot.world.model.cam_fovy[robot.camera_id])
-        if abs(fovy - math.degrees(model.vfov)) > 0.01:
+        lens_renders = effects is not None and effects.settings.lens is not None
+        if not lens_renders and abs(fovy - math.degrees(model.vfov)) > 0.01:
             raise OutOfRangeError(
                 self.name,
                 f"render {model.width}x{model.height} at {math.degrees(model.hfov):.1f} deg hfov",
@@ -513,9 +539,12 @@ class SimCamera(_SimDevice, Camera):
 
     def connect(self) -> None:
         if self._renderer is None:
-            self._renderer = FrameRenderer(
-                self.robot.world.model, self._model.width, self._model.height, CAMERA_NAME
+            width, height = (
+                self.effects.canvas_size
+                if self.effects is not None
+                else (self._model.width, self._model.height)
             )
+            self._renderer = FrameRenderer(self.robot.world.model, width, height, CAMERA_NAME)
         self._connected = True
 
     def close(self) -> None:
@@ -524,14 +553,45 @@ class SimCamera(_SimDevice, Camera):
             self._renderer = None
         self._connected = False
 
+    def rates(self) -> tuple[float, float]:
+        """The camera's (horizontal, vertical) angular rates now, rad/s: pan plus the base's
+        turn, and tilt (what smears a frame during its exposure)."""
+        pan_rate, tilt_rate = self.robot.head_rates()
+        yaw_rate = float(self.robot.world.data.qvel[self.robot._free_qvel + 5])
+        return pan_rate + yaw_rate, tilt_rate
+
     def grab(self) -> Frame:
         self.require_connected("grab a frame")
         assert self._renderer is not None
         with self.robot.lock:
             data = self.robot.world.data
+            now = self.robot.world.time
+            if self.effects is None:
+                image = self._renderer.render(data)
+                depth = self._renderer.depth(data) if self.depth else None
+                return Frame(image, now, depth)
+            image, depth = self._render_canvas(data)
+            dt = None if self._last_grab is None else now - self._last_grab
+            self._last_grab = now
+            image, depth = self.effects.apply(image, depth, self._rng, self.rates(), dt)
+            return Frame(image, now, depth)
+
+    def _render_canvas(self, data: mujoco.MjData) -> tuple[np.ndarray, np.ndarray | None]:
+        """The undistorted frame the effects start from: at the lens's wider canvas field (the
+        MJCF camera's fovy is swapped in for this render only, and restored)."""
+        assert self._renderer is not None and self.effects is not None
+        model, cam = self.robot.world.model, self.robot.camera_id
+        if self.effects.settings.lens is None:
+            image = self._renderer.render(data)
+            return image, self._renderer.depth(data) if self.depth else None
+        saved = float(model.cam_fovy[cam])
+        model.cam_fovy[cam] = math.degrees(self.effects.canvas_fovy)
+        try:
             image = self._renderer.render(data)
             depth = self._renderer.depth(data) if self.depth else None
-            return Frame(image, self.robot.world.time, depth)
+        finally:
+            model.cam_fovy[cam] = saved
+        return image, depth
 
     def now(self) -> float:
         return self.robot.world.time
