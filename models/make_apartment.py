@@ -1,0 +1,594 @@
+"""Make the apartment scene, its three new sought objects and their textures, reproducibly.
+
+Run from anywhere: ``python models/make_apartment.py``. Everything is drawn from a fixed seed
+with numpy and OpenCV only, so re-running it rewrites byte-identical files; the outputs are
+committed so that loading a scene never needs this script. It leaves every file of
+``make_assets.py`` alone (the living room's textures and bookcase).
+
+Outputs:
+- ``models/textures/tea_tin.png``, ``game_box.png``, ``toy_crate.png``: the objects' prints
+  (saturated, varied colours: RFCH keys on colour and texture), and ``tiles.png``,
+  ``carpet.png``, ``slate.png``: the kitchen's, bedroom's and hall's floors;
+- ``models/tea_tin.xml``, ``game_box.xml``, ``toy_crate.xml``: each object's look, size and
+  class, like ``models/rice_box.xml``;
+- ``scenes/apartment.xml``: the 10 m x 8 m apartment. The living room (x 0-4.5, y 0-6) is the
+  paper's, its furniture and target included from ``models/living_room_furniture.xml`` at the
+  same place; a hall above it (y 6.1-8), a kitchen (x 4.6-10, y 3.6-8) and a bedroom (x 4.6-10,
+  y 0-3.5) beside it. Walls between rooms are named bodies (``wall_*``) with door openings 1 m
+  wide, so ``World.furniture`` lists them and every obstacle test sees them.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+HERE = Path(__file__).resolve().parent
+SCENES = HERE.parent / "scenes"
+SEED = 20261130
+
+WIDTH, DEPTH, HEIGHT = 10.0, 8.0, 2.5  # metres: the apartment's floor and ceiling
+WALL = 0.1  # metres: wall thickness
+DOOR = 1.0  # metres: every door opening's width (the Peoplebot is ~0.5 m across)
+
+
+def _write_png(path: Path, rgb: np.ndarray) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    bgr = cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR)
+    ok, buf = cv2.imencode(".png", bgr, [cv2.IMWRITE_PNG_COMPRESSION, 9])
+    if not ok:
+        raise RuntimeError(f"could not encode {path}")
+    path.write_bytes(buf.tobytes())
+
+
+# -- the sought objects ----------------------------------------------------------------------
+# name: (half sizes x, y, z in metres: x is the print's normal, y its width, z its height;
+#        mass kg, what it is). The print (texture) covers the +x face at the face's aspect.
+OBJECTS = {
+    "tea_tin": ((0.05, 0.05, 0.07), 0.3, "a tin of tea, 0.10 m x 0.10 m x 0.14 m tall"),
+    "game_box": ((0.03, 0.15, 0.11), 0.6, "a board game standing on end, 0.30 m x 0.22 m"),
+    "toy_crate": ((0.15, 0.20, 0.125), 2.0, "a toy crate, 0.40 m wide x 0.30 m x 0.25 m tall"),
+}
+
+
+def tea_tin() -> np.ndarray:
+    """A deep green tin with an orange medallion, a white leaf and a gold rim."""
+    h, w = 168, 120
+    img = np.full((h, w, 3), (10, 120, 60), np.uint8)
+    img[:14] = img[-14:] = (230, 180, 20)  # gold rims
+    cv2.circle(img, (60, 84), 40, (250, 120, 10), -1, cv2.LINE_AA)
+    cv2.circle(img, (60, 84), 40, (230, 180, 20), 3, cv2.LINE_AA)
+    cv2.ellipse(img, (60, 84), (14, 28), 30, 0, 360, (255, 255, 255), -1, cv2.LINE_AA)
+    cv2.line(img, (50, 104), (70, 64), (10, 120, 60), 2, cv2.LINE_AA)
+    cv2.putText(img, "TEA", (30, 156), cv2.FONT_HERSHEY_DUPLEX, 0.8, (255, 255, 255), 2)
+    for k in range(6):  # a band of small red diamonds under the top rim
+        x = 10 + 20 * k
+        pts = np.array([[x, 22], [x + 6, 28], [x, 34], [x - 6, 28]], np.int32)
+        cv2.fillPoly(img, [pts], (220, 30, 40), cv2.LINE_AA)
+    return img
+
+
+def game_box() -> np.ndarray:
+    """A purple game box with cyan and magenta diamonds and a yellow title."""
+    h, w = 176, 240
+    img = np.full((h, w, 3), (90, 30, 150), np.uint8)
+    for k, x in enumerate(range(20, 240, 40)):
+        colour = (0, 210, 230) if k % 2 == 0 else (240, 40, 170)
+        pts = np.array([[x, 70], [x + 18, 100], [x, 130], [x - 18, 100]], np.int32)
+        cv2.fillPoly(img, [pts], colour, cv2.LINE_AA)
+    img[:50] = (250, 220, 0)
+    cv2.putText(img, "QUEST", (52, 40), cv2.FONT_HERSHEY_DUPLEX, 1.2, (90, 30, 150), 3)
+    img[150:] = (0, 160, 120)
+    cv2.rectangle(img, (0, 0), (w - 1, h - 1), (40, 10, 70), 3)
+    return img
+
+
+def toy_crate() -> np.ndarray:
+    """A turquoise crate with big red, yellow and blue letter blocks."""
+    h, w = 160, 256
+    img = np.full((h, w, 3), (20, 190, 190), np.uint8)
+    blocks = (((30, 40), (220, 30, 30), "A"), ((100, 40), (250, 210, 0), "B"))
+    blocks += (((170, 40), (30, 70, 210), "C"),)
+    for (x, y), colour, letter in blocks:
+        cv2.rectangle(img, (x, y), (x + 56, y + 56), colour, -1)
+        cv2.putText(img, letter, (x + 12, y + 46), cv2.FONT_HERSHEY_DUPLEX, 1.5, (255, 255, 255), 3)
+    img[120:136] = (240, 90, 160)  # a pink stripe
+    cv2.rectangle(img, (0, 0), (w - 1, h - 1), (10, 80, 80), 4)
+    return img
+
+
+def object_xml(name: str) -> str:
+    (hx, hy, hz), mass, what = OBJECTS[name]
+    return f"""<!--
+  A sought object: {what}, {mass:g} kg.
+  Generated by models/make_apartment.py; do not edit by hand.
+
+  This file holds only the object's look and size (an asset and a default class), so every scene
+  shows the same object: a scene includes it at the top level and places a body of its own,
+  named "{name}", holding one geom of class "{name}". Its body frame is the object's centre;
+  the printed front faces the body's +x.
+-->
+<mujoco model="{name}">
+  <compiler angle="radian"/>
+  <asset>
+    <texture name="{name}" type="2d" file="../models/textures/{name}.png"/>
+    <material name="{name}" texture="{name}" specular="0.3" shininess="0.3"/>
+  </asset>
+  <default>
+    <default class="{name}">
+      <geom type="box" size="{hx:g} {hy:g} {hz:g}" mass="{mass:g}" material="{name}"
+            contype="1" conaffinity="1"/>
+    </default>
+  </default>
+</mujoco>
+"""
+
+
+# -- surfaces -------------------------------------------------------------------------------
+
+
+def tiles(rng: np.random.Generator) -> np.ndarray:
+    """Pale ceramic tiles with grey grout, each tile a slightly different shade."""
+    img = np.zeros((128, 128, 3), np.float32)
+    for i in range(4):
+        for j in range(4):
+            tone = rng.uniform(0.93, 1.02)
+            img[32 * i : 32 * (i + 1), 32 * j : 32 * (j + 1)] = np.array([225, 228, 222]) * tone
+    img[::32] = img[:, ::32] = (150, 150, 145)
+    img += rng.normal(0, 2.0, img.shape[:2])[..., None]
+    return np.clip(img, 0, 255).astype(np.uint8)
+
+
+def noise(rng: np.random.Generator, rgb: tuple[int, int, int], amp: float, blur: float):
+    n = cv2.GaussianBlur(rng.normal(0, 1, (64, 64)).astype(np.float32), (0, 0), blur)
+    return np.clip(np.array(rgb, np.float32) + amp * n[..., None], 0, 255).astype(np.uint8)
+
+
+# -- the scene ------------------------------------------------------------------------------
+
+
+def _f(*values: float) -> str:
+    return " ".join(f"{v:.4g}" for v in values)
+
+
+def box_between(x0: float, x1: float, y0: float, y1: float, z0: float, z1: float) -> str:
+    """pos and size attributes of an axis-aligned box spanning the given ranges (metres)."""
+    c = ((x0 + x1) / 2, (y0 + y1) / 2, (z0 + z1) / 2)
+    h = ((x1 - x0) / 2, (y1 - y0) / 2, (z1 - z0) / 2)
+    return f'pos="{_f(*c)}" size="{_f(*h)}"'
+
+
+def wall(name: str, x0: float, x1: float, y0: float, y1: float) -> str:
+    """An interior wall segment: a named body under the world (so an obstacle everywhere)."""
+    return (
+        f'    <body name="wall_{name}">\n'
+        f'      <geom name="wall_{name}" class="room" '
+        f"{box_between(x0, x1, y0, y1, 0.0, HEIGHT)}/>\n"
+        "    </body>\n"
+    )
+
+
+def bookshelf_items(rng: np.random.Generator, shelves, width, depth, keep_free) -> list[str]:
+    """Books and boxes on the bedroom bookshelf's shelves (body frame: centre of the footprint
+    on the floor, the back toward +y); ``keep_free`` is (shelf index, x from, x to) left empty
+    for a sought object."""
+    colours = ((0.75, 0.15, 0.15), (0.15, 0.35, 0.65), (0.2, 0.5, 0.25), (0.9, 0.8, 0.6))
+    colours += ((0.3, 0.3, 0.3), (0.6, 0.4, 0.2), (0.85, 0.85, 0.8), (0.5, 0.6, 0.65))
+    out, n = [], 0
+    for s, (top, clearance) in enumerate(shelves):
+        x = -width / 2 + 0.03
+        while True:
+            w = rng.uniform(0.02, 0.05) if rng.random() > 0.15 else rng.uniform(0.1, 0.16)
+            if x + w > width / 2 - 0.03:
+                break
+            free = keep_free[0] == s and x + w > keep_free[1] and x < keep_free[2]
+            if free or rng.random() < 0.08:
+                x += 0.02 if not free else keep_free[2] - x
+                continue
+            h = rng.uniform(0.5, 0.85) * clearance if w < 0.1 else rng.uniform(0.08, 0.2)
+            d = rng.uniform(0.15, depth - 0.08)
+            r, g, b = colours[int(rng.integers(len(colours)))]
+            rgba = _f(*(min(1.0, c * rng.uniform(0.8, 1.1)) for c in (r, g, b))) + " 1"
+            out.append(
+                f'      <geom name="bookshelf_item{n}" class="shelf_item" '
+                f'pos="{_f(x + w / 2, depth / 2 - 0.02 - d / 2, top + h / 2)}" '
+                f'size="{_f(w / 2, d / 2, h / 2)}" rgba="{rgba}"/>'
+            )
+            n += 1
+            x += w + rng.uniform(0.0, 0.006)
+    return out
+
+
+SHELF_TOPS = (0.05, 0.43, 0.83, 1.23, 1.61)  # m: the bedroom bookshelf's shelf surfaces
+BOOKSHELF = (7.6, 3.33, 1.2, 0.34, 1.9)  # x, y of the centre, width, depth, height (m)
+GAME_BOX_SLOT = (3, -0.45, -0.05)  # shelf index, free x range in the bookshelf's frame (m)
+
+
+def bookshelf(rng: np.random.Generator) -> str:
+    x, y, width, depth, height = BOOKSHELF
+    board = 0.02
+    lines = [
+        f'    <body name="bookshelf" pos="{_f(x, y, 0)}" childclass="carcass">',
+        f'      <geom name="bookshelf_left" {box_between(-width / 2, -width / 2 + board, -depth / 2, depth / 2, 0, height)}/>',  # noqa: E501
+        f'      <geom name="bookshelf_right" {box_between(width / 2 - board, width / 2, -depth / 2, depth / 2, 0, height)}/>',  # noqa: E501
+        f'      <geom name="bookshelf_back" {box_between(-width / 2, width / 2, depth / 2 - 0.01, depth / 2, 0, height)}/>',  # noqa: E501
+        f'      <geom name="bookshelf_top" {box_between(-width / 2, width / 2, -depth / 2, depth / 2, height - board, height)}/>',  # noqa: E501
+    ]
+    shelves = []
+    for s, top in enumerate(SHELF_TOPS):
+        lo, hi = -width / 2 + board, width / 2 - board
+        lines.append(
+            f'      <geom name="bookshelf_shelf{s}" '
+            f"{box_between(lo, hi, -depth / 2 + 0.01, depth / 2 - 0.01, top - board, top)}/>"
+        )
+        above = SHELF_TOPS[s + 1] - board if s + 1 < len(SHELF_TOPS) else height - board
+        shelves.append((top, above - top))
+    lines += bookshelf_items(rng, shelves, width, depth, GAME_BOX_SLOT)
+    lines.append("    </body>")
+    return "\n".join(lines) + "\n"
+
+
+ASSETS = """  <asset>
+    <!-- the living room's (as in scenes/living_room.xml) -->
+    <texture name="floor" type="2d" file="../models/textures/floor.png"/>
+    <material name="floor" texture="floor" texrepeat="0.8 0.8" texuniform="true" specular="0.1"/>
+    <texture name="wall" type="2d" file="../models/textures/wall.png"/>
+    <material name="wall" texture="wall" texrepeat="2 2" texuniform="true" specular="0"/>
+    <material name="ceiling" rgba="0.95 0.95 0.93 1" specular="0"/>
+    <texture name="fabric" type="2d" file="../models/textures/fabric.png"/>
+    <material name="fabric" texture="fabric" texrepeat="4 4" texuniform="true" specular="0.05"/>
+    <texture name="wood_dark" type="2d" file="../models/textures/wood_dark.png"/>
+    <material name="wood_dark" texture="wood_dark" texrepeat="3 3" texuniform="true"
+              specular="0.2"/>
+    <material name="wood_light" rgba="0.78 0.62 0.42 1" specular="0.2"/>
+    <material name="metal" rgba="0.25 0.25 0.27 1" specular="0.6"/>
+    <material name="chair_red" rgba="0.78 0.12 0.12 1" specular="0.1"/>
+    <material name="chair_yellow" rgba="0.92 0.72 0.12 1" specular="0.1"/>
+    <material name="chair_blue" rgba="0.15 0.25 0.62 1" specular="0.1"/>
+    <material name="rug" rgba="0.55 0.58 0.45 1" specular="0"/>
+    <material name="cream" rgba="0.93 0.90 0.80 1" specular="0.1"/>
+    <material name="screen" rgba="0.05 0.06 0.08 1" specular="0.8"/>
+    <material name="leaf" rgba="0.18 0.45 0.18 1" specular="0.05"/>
+    <material name="terracotta" rgba="0.70 0.36 0.22 1" specular="0.05"/>
+    <material name="window" rgba="0.62 0.76 0.90 1" specular="0.5" emission="0.3"/>
+    <!-- the other rooms' -->
+    <texture name="tiles" type="2d" file="../models/textures/tiles.png"/>
+    <material name="tiles" texture="tiles" texrepeat="2.5 2.5" texuniform="true" specular="0.2"/>
+    <texture name="carpet" type="2d" file="../models/textures/carpet.png"/>
+    <material name="carpet" texture="carpet" texrepeat="4 4" texuniform="true" specular="0"/>
+    <texture name="slate" type="2d" file="../models/textures/slate.png"/>
+    <material name="slate" texture="slate" texrepeat="2 2" texuniform="true" specular="0.1"/>
+    <material name="cabinet" rgba="0.90 0.88 0.82 1" specular="0.2"/>
+    <material name="worktop" rgba="0.30 0.30 0.32 1" specular="0.4"/>
+    <material name="steel" rgba="0.80 0.81 0.82 1" specular="0.7"/>
+    <material name="linen" rgba="0.86 0.84 0.90 1" specular="0"/>
+    <material name="blanket" rgba="0.35 0.45 0.60 1" specular="0"/>
+  </asset>
+"""
+
+DEFAULTS = """  <default>
+    <default class="room">
+      <geom type="box" material="wall" contype="1" conaffinity="1"/>
+    </default>
+    <default class="furniture">
+      <geom type="box" contype="1" conaffinity="1" material="wood_light"/>
+      <default class="leg">
+        <geom type="cylinder" material="metal"/>
+      </default>
+    </default>
+    <default class="carcass">
+      <geom type="box" contype="1" conaffinity="1" material="wood_dark"/>
+    </default>
+    <default class="decor">
+      <geom contype="0" conaffinity="0" group="1"/>
+    </default>
+    <default class="shelf_item">
+      <geom type="box" contype="0" conaffinity="0" group="1"/>
+    </default>
+  </default>
+"""
+
+HEADER = """<!--
+  The apartment: 10 m x 8 m, four rooms. Generated by models/make_apartment.py; do not edit by
+  hand (change the script and re-run it).
+
+  - living room, x 0-4.5, y 0-6: the paper's (scenes/living_room.xml), its furniture and the rice
+    box on the coffee table included from models/living_room_furniture.xml at the same place;
+  - hall, x 0-4.5, y 6.1-8: coat rack, shoe cabinet, the front door; a toy crate on the floor;
+  - kitchen, x 4.6-10, y 3.6-8: counters 0.9 m high with wall cabinets, a fridge, a table and
+    two stools; a tin of tea on the counter;
+  - bedroom, x 4.6-10, y 0-3.5: a bed, a nightstand, a wardrobe, a desk and its chair, and a
+    bookshelf with shelves up to 1.6 m; a board game on its 1.23 m shelf.
+  Door openings (1 m wide): living room - hall in the wall y 6.0-6.1 at x 1.95-2.95; living room
+  - kitchen in the wall x 4.5-4.6 at y 3.8-4.8 (near where the living room has its door); hall -
+  kitchen in the same wall at y 6.6-7.6; kitchen - bedroom in the wall y 3.5-3.6 at x 5.0-6.0.
+
+  Conventions as in the living room: map frame = MuJoCo world frame (x right, y up, metres,
+  origin at the apartment's lower-left corner, z up from the floor); every piece of furniture,
+  and every interior wall segment, is a named body directly under the world; targets are in the
+  custom text "twin_targets", the robot's start pose (x y yaw) in "twin_robot_start", and each
+  target's support kind (twin.sim.placement.SUPPORT_KINDS) in "twin_target_supports". Static
+  geoms never collide with each other; decorations (class "decor") are visual only. One floor
+  plane covers the whole apartment; the kitchen's, bedroom's and hall's floors are 2 mm decor
+  coverings on it.
+-->
+"""
+
+
+def scene_xml(rng: np.random.Generator) -> str:
+    w, d, h = WIDTH, DEPTH, HEIGHT
+    parts = [HEADER, '<mujoco model="apartment">\n']
+    parts.append("""  <compiler angle="radian" autolimits="true"/>
+  <!-- 4 ms steps with implicit-fast integration, as the living room -->
+  <option timestep="0.004" integrator="implicitfast"/>
+
+  <include file="../models/peoplebot.xml"/>
+  <include file="../models/rice_box.xml"/>
+  <include file="../models/tea_tin.xml"/>
+  <include file="../models/game_box.xml"/>
+  <include file="../models/toy_crate.xml"/>
+
+  <custom>
+    <text name="twin_targets" data="rice_box tea_tin game_box toy_crate"/>
+    <text name="twin_target_supports"
+          data="rice_box:table tea_tin:counter game_box:shelf toy_crate:floor"/>
+    <numeric name="twin_robot_start" data="2.25 2.5 1.5708"/>
+  </custom>
+
+""")
+    parts.append(f'  <statistic center="{_f(w / 2, d / 2, 1)}" extent="7"/>\n')
+    parts.append("""  <visual>
+    <!-- no shadow maps: software rendering spends most of its time on them -->
+    <quality shadowsize="0" offsamples="4"/>
+    <headlight ambient="0.3 0.3 0.3" diffuse="0.25 0.25 0.25" specular="0 0 0"/>
+    <map znear="0.005"/>
+    <global offwidth="640" offheight="480"/>
+  </visual>
+
+""")
+    parts += [ASSETS, "\n", DEFAULTS, "\n  <worldbody>\n"]
+    parts.append("""    <!-- lights: one sun, ceiling lights per room, no shadows;
+         seven and the headlight: OpenGL draws 8. -->
+    <light name="sun" directional="true" pos="5 4 5" dir="0.2 0.3 -1" diffuse="0.5 0.5 0.47"
+           specular="0.1 0.1 0.1" castshadow="false"/>
+    <light name="ceiling_a" pos="1.5 4.5 2.4" dir="0 0 -1" diffuse="0.35 0.34 0.30"
+           attenuation="1 0 0.05" castshadow="false"/>
+    <light name="ceiling_b" pos="3.0 1.5 2.4" dir="0 0 -1" diffuse="0.35 0.34 0.30"
+           attenuation="1 0 0.05" castshadow="false"/>
+    <light name="hall" pos="2.25 7.05 2.4" dir="0 0 -1" diffuse="0.35 0.34 0.30"
+           attenuation="1 0 0.05" castshadow="false"/>
+    <light name="kitchen_a" pos="6.3 5.5 2.4" dir="0 0 -1" diffuse="0.35 0.34 0.30"
+           attenuation="1 0 0.05" castshadow="false"/>
+    <light name="kitchen_b" pos="8.6 6.6 2.4" dir="0 0 -1" diffuse="0.35 0.34 0.30"
+           attenuation="1 0 0.05" castshadow="false"/>
+    <light name="bedroom" pos="7.3 1.75 2.4" dir="0 0 -1" diffuse="0.40 0.39 0.34"
+           attenuation="1 0 0.04" castshadow="false"/>
+
+""")
+    parts.append(
+        f"    <!-- floor and ceiling over the whole apartment; outer walls outside [0, {w:g}] x "
+        f"[0, {d:g}] -->\n"
+        f'    <geom name="floor" type="plane" pos="{_f(w / 2, d / 2, 0)}" '
+        f'size="{_f(w / 2, d / 2, 0.1)}" material="floor"/>\n'
+        f'    <geom name="ceiling" type="plane" pos="{_f(w / 2, d / 2, h)}" '
+        f'size="{_f(w / 2, d / 2, 0.1)}" euler="3.14159 0 0"\n'
+        '          material="ceiling" contype="0" conaffinity="0"/>\n'
+        f'    <geom name="wall_left" class="room" {box_between(-WALL, 0, -WALL, d + WALL, 0, h)}/>\n'  # noqa: E501
+        f'    <geom name="wall_right" class="room" {box_between(w, w + WALL, -WALL, d + WALL, 0, h)}/>\n'  # noqa: E501
+        f'    <geom name="wall_bottom" class="room" {box_between(0, w, -WALL, 0, 0, h)}/>\n'
+        f'    <geom name="wall_top" class="room" {box_between(0, w, d, d + WALL, 0, h)}/>\n'
+        "    <!-- floor coverings (2 mm, visual only) -->\n"
+        f'    <geom name="hall_floor" class="decor" type="box" '
+        f'{box_between(0, 4.5, 6.1, d, 0, 0.002)} material="slate"/>\n'
+        f'    <geom name="kitchen_floor" class="decor" type="box" '
+        f'{box_between(4.6, w, 3.6, d, 0, 0.002)} material="tiles"/>\n'
+        f'    <geom name="bedroom_floor" class="decor" type="box" '
+        f'{box_between(4.6, w, 0, 3.5, 0, 0.002)} material="carpet"/>\n\n'
+    )
+    parts.append("    <!-- interior walls, each segment a body, with 1 m door openings -->\n")
+    parts.append(wall("living_bedroom", 4.5, 4.6, 0.0, 3.8))
+    parts.append(wall("living_kitchen", 4.5, 4.6, 3.8 + DOOR, 6.6))
+    parts.append(wall("hall_kitchen", 4.5, 4.6, 6.6 + DOOR, d))
+    parts.append(wall("living_hall_w", 0.0, 1.95, 6.0, 6.1))
+    parts.append(wall("living_hall_e", 1.95 + DOOR, 4.5, 6.0, 6.1))
+    parts.append(wall("kitchen_bedroom_w", 4.6, 5.0, 3.5, 3.6))
+    parts.append(wall("kitchen_bedroom_e", 5.0 + DOOR, w, 3.5, 3.6))
+    parts.append("""
+    <!-- the living room's wall decorations that hang on outer walls, and its picture -->
+    <geom name="picture" class="decor" type="box" pos="3.5 5.995 1.55" size="0.45 0.005 0.3"
+          rgba="0.35 0.55 0.75 1"/>
+    <geom name="picture_sun" class="decor" type="cylinder" pos="3.7 5.988 1.65"
+          size="0.09 0.003" zaxis="0 1 0" rgba="0.95 0.85 0.55 1"/>
+    <geom name="picture_hill" class="decor" type="box" pos="3.4 5.988 1.36" size="0.34 0.003 0.1"
+          rgba="0.35 0.55 0.30 1"/>
+    <geom name="clock" class="decor" type="cylinder" pos="0.005 2.0 1.7" size="0.16 0.005"
+          zaxis="1 0 0" material="cream"/>
+    <geom name="clock_hands" class="decor" type="box" pos="0.012 2.0 1.74" size="0.002 0.01 0.05"
+          rgba="0.1 0.1 0.1 1"/>
+    <geom name="poster" class="decor" type="box" pos="0.995 0.005 1.5" size="0.3 0.005 0.4"
+          rgba="0.80 0.55 0.35 1"/>
+    <geom name="poster_art" class="decor" type="box" pos="0.995 0.012 1.55" size="0.22 0.003 0.25"
+          rgba="0.25 0.35 0.55 1"/>
+    <geom name="window_living" class="decor" type="box" pos="0.005 3.4 1.45" size="0.005 0.5 0.55"
+          material="window"/>
+
+    <!-- the living room's furniture and the rice box, as in scenes/living_room.xml -->
+    <include file="../models/living_room_furniture.xml"/>
+
+    <!-- hall: front door on the left wall, coat rack, shoe cabinet, mirror, doormat -->
+    <geom name="front_door" class="decor" type="box" pos="0.005 7.05 1.0" size="0.005 0.45 1.0"
+          material="wood_dark"/>
+    <geom name="front_door_handle" class="decor" type="sphere" pos="0.02 7.4 1.0" size="0.03"
+          material="steel"/>
+    <geom name="doormat" class="decor" type="box" pos="0.45 7.05 0.004" size="0.3 0.45 0.002"
+          rgba="0.45 0.30 0.20 1"/>
+    <geom name="mirror" class="decor" type="box" pos="3.0 7.995 1.4" size="0.35 0.005 0.5"
+          rgba="0.75 0.82 0.85 1" material="window"/>
+    <body name="coat_rack" pos="0.35 7.7 0" childclass="furniture">
+      <geom name="coat_rack_foot" type="cylinder" pos="0 0 0.02" size="0.2 0.02" material="metal"/>
+      <geom name="coat_rack_pole" class="leg" pos="0 0 0.9" size="0.02 0.88"/>
+      <geom name="coat_rack_coat" class="decor" type="box" pos="0.12 0 1.25" size="0.06 0.22 0.4"
+            rgba="0.55 0.15 0.20 1"/>
+      <geom name="coat_rack_scarf" class="decor" type="box" pos="-0.08 0.08 1.45"
+            size="0.04 0.06 0.3" rgba="0.90 0.75 0.20 1"/>
+      <geom name="coat_rack_hat" class="decor" type="cylinder" pos="0 0 1.82" size="0.15 0.05"
+            rgba="0.20 0.20 0.25 1"/>
+    </body>
+    <body name="shoe_cabinet" pos="1.6 7.82 0" childclass="furniture">
+      <geom name="shoe_cabinet_body" pos="0 0 0.45" size="0.6 0.18 0.45" material="cabinet"/>
+      <geom name="shoe_cabinet_front" class="decor" type="box" pos="0 -0.182 0.45"
+            size="0.58 0.003 0.42" material="wood_light"/>
+      <geom name="shoe_cabinet_bowl" class="decor" type="cylinder" pos="-0.3 0 0.92"
+            size="0.1 0.02" rgba="0.20 0.45 0.70 1"/>
+    </body>
+    <body name="toy_crate" pos="3.7 7.35 0.125" euler="0 0 3.14159">
+      <geom name="toy_crate" class="toy_crate"/>
+    </body>
+
+    <!-- kitchen: counters on the top and right walls with wall cabinets, fridge, table, stools -->
+    <geom name="window_kitchen" class="decor" type="box" pos="9.995 4.55 1.45"
+          size="0.005 0.3 0.5" material="window"/>
+    <geom name="kitchen_clock" class="decor" type="cylinder" pos="4.605 5.9 1.8" size="0.14 0.005"
+          zaxis="1 0 0" rgba="0.85 0.25 0.20 1"/>
+    <body name="kitchen_counter" pos="7.6 7.7 0" childclass="furniture">
+      <geom name="kitchen_counter_body" pos="0 0.01 0.44" size="1.6 0.29 0.42" material="cabinet"/>
+      <geom name="kitchen_counter_top" pos="0 0 0.88" size="1.6 0.3 0.02" material="worktop"/>
+      <geom name="kitchen_counter_doors" class="decor" type="box" pos="0 -0.282 0.46"
+            size="1.56 0.003 0.36" material="wood_light"/>
+      <geom name="kitchen_oven" class="decor" type="box" pos="0.8 -0.287 0.45"
+            size="0.3 0.003 0.3" material="screen"/>
+      <geom name="kitchen_kettle" class="decor" type="cylinder" pos="-1.2 0.05 0.99"
+            size="0.08 0.09" material="steel"/>
+      <geom name="kitchen_board" class="decor" type="box" pos="0.9 0.1 0.91" size="0.22 0.14 0.01"
+            material="wood_light"/>
+    </body>
+    <body name="kitchen_wall_cabinet" pos="7.6 7.825 0" childclass="furniture">
+      <geom name="kitchen_wall_cabinet_body" pos="0 0 1.8" size="1.6 0.175 0.35"
+            material="cabinet"/>
+      <geom name="kitchen_wall_cabinet_doors" class="decor" type="box" pos="0 -0.178 1.8"
+            size="1.56 0.003 0.32" material="wood_light"/>
+    </body>
+    <body name="fridge" pos="9.65 7.65 0" childclass="furniture">
+      <geom name="fridge_body" pos="0 0 0.925" size="0.35 0.35 0.925" material="steel"/>
+      <geom name="fridge_handle" class="decor" type="box" pos="-0.36 -0.2 1.1"
+            size="0.01 0.015 0.25" material="metal"/>
+    </body>
+    <body name="kitchen_side_counter" pos="9.7 6.1 0" childclass="furniture">
+      <geom name="kitchen_side_counter_body" pos="0.01 0 0.44" size="0.29 1.1 0.42"
+            material="cabinet"/>
+      <geom name="kitchen_side_counter_top" pos="0 0 0.88" size="0.3 1.1 0.02" material="worktop"/>
+      <geom name="kitchen_sink" class="decor" type="box" pos="0 0.3 0.9" size="0.2 0.3 0.003"
+            material="steel"/>
+      <geom name="kitchen_tap" class="decor" type="capsule" pos="0.22 0.3 1.0" size="0.015 0.1"
+            material="steel"/>
+      <geom name="kitchen_bottle" class="decor" type="cylinder" pos="0.05 -0.7 1.02"
+            size="0.04 0.12" rgba="0.25 0.55 0.30 1"/>
+    </body>
+    <body name="kitchen_table" pos="7.0 5.9 0" childclass="furniture">
+      <geom name="kitchen_table_top" pos="0 0 0.735" size="0.6 0.4 0.02" material="cream"/>
+      <geom name="kitchen_table_leg0" class="leg" pos="0.55 0.35 0.36" size="0.025 0.36"/>
+      <geom name="kitchen_table_leg1" class="leg" pos="-0.55 0.35 0.36" size="0.025 0.36"/>
+      <geom name="kitchen_table_leg2" class="leg" pos="0.55 -0.35 0.36" size="0.025 0.36"/>
+      <geom name="kitchen_table_leg3" class="leg" pos="-0.55 -0.35 0.36" size="0.025 0.36"/>
+      <geom name="kitchen_table_bowl" class="decor" type="cylinder" pos="0.2 0.05 0.78"
+            size="0.12 0.03" rgba="0.85 0.85 0.82 1"/>
+      <geom name="kitchen_table_lemon" class="decor" type="sphere" pos="0.18 0.02 0.83"
+            size="0.04" rgba="0.95 0.85 0.15 1"/>
+    </body>
+    <body name="kitchen_stool_a" pos="6.05 5.9 0" childclass="furniture">
+      <geom name="kitchen_stool_a_seat" type="cylinder" pos="0 0 0.46" size="0.18 0.02"
+            material="wood_dark"/>
+      <geom name="kitchen_stool_a_leg" class="leg" pos="0 0 0.22" size="0.025 0.22"/>
+    </body>
+    <body name="kitchen_stool_b" pos="7.95 5.9 0" childclass="furniture">
+      <geom name="kitchen_stool_b_seat" type="cylinder" pos="0 0 0.46" size="0.18 0.02"
+            material="wood_dark"/>
+      <geom name="kitchen_stool_b_leg" class="leg" pos="0 0 0.22" size="0.025 0.22"/>
+    </body>
+    <body name="tea_tin" pos="7.0 7.6 0.97" euler="0 0 -1.5708">
+      <geom name="tea_tin" class="tea_tin"/>
+    </body>
+
+    <!-- bedroom: bed with headboard on the right wall, nightstand, wardrobe, desk, bookshelf -->
+    <geom name="window_bedroom" class="decor" type="box" pos="9.0 0.005 1.45" size="0.6 0.005 0.5"
+          material="window"/>
+    <geom name="bedroom_picture" class="decor" type="box" pos="7.5 0.005 1.5" size="0.4 0.005 0.3"
+          rgba="0.80 0.45 0.25 1"/>
+    <geom name="bedroom_rug" class="decor" type="box" pos="6.8 1.9 0.004" size="0.8 0.6 0.002"
+          rgba="0.70 0.55 0.40 1"/>
+    <body name="bed" pos="8.925 2.0 0" childclass="furniture">
+      <geom name="bed_frame" pos="0 0 0.15" size="1.025 0.8 0.15" material="wood_light"/>
+      <geom name="bed_mattress" pos="-0.02 0 0.4" size="1.0 0.78 0.1" material="linen"/>
+      <geom name="bed_headboard" pos="0.975 0 0.55" size="0.05 0.8 0.55" material="wood_dark"/>
+      <geom name="bed_blanket" class="decor" type="box" pos="-0.3 0 0.51" size="0.72 0.8 0.015"
+            material="blanket"/>
+      <geom name="bed_pillow_a" class="decor" type="box" pos="0.72 0.35 0.56" size="0.15 0.3 0.06"
+            material="linen"/>
+      <geom name="bed_pillow_b" class="decor" type="box" pos="0.72 -0.35 0.56"
+            size="0.15 0.3 0.06" material="linen"/>
+    </body>
+    <body name="nightstand" pos="9.72 3.05 0" childclass="furniture">
+      <geom name="nightstand_body" pos="0 0 0.275" size="0.22 0.22 0.275" material="wood_dark"/>
+      <geom name="nightstand_lamp" class="decor" type="cylinder" pos="0 0 0.65" size="0.1 0.1"
+            material="cream"/>
+    </body>
+    <body name="wardrobe" pos="5.6 0.31 0" childclass="furniture">
+      <geom name="wardrobe_body" pos="0 0 1.0" size="0.6 0.3 1.0" material="wood_light"/>
+      <geom name="wardrobe_split" class="decor" type="box" pos="0 -0.302 1.0"
+            size="0.005 0.003 0.95" material="wood_dark"/>
+      <geom name="wardrobe_handle_a" class="decor" type="box" pos="-0.05 -0.305 1.0"
+            size="0.01 0.005 0.12" material="metal"/>
+      <geom name="wardrobe_handle_b" class="decor" type="box" pos="0.05 -0.305 1.0"
+            size="0.01 0.005 0.12" material="metal"/>
+    </body>
+    <body name="desk" pos="4.9 2.4 0" euler="0 0 1.5708" childclass="furniture">
+      <geom name="desk_top" pos="0 0 0.735" size="0.6 0.3 0.02" material="wood_light"/>
+      <geom name="desk_drawers" pos="0.4 0 0.36" size="0.18 0.28 0.36" material="wood_light"/>
+      <geom name="desk_leg0" class="leg" pos="-0.55 0.25 0.36" size="0.025 0.36"/>
+      <geom name="desk_leg1" class="leg" pos="-0.55 -0.25 0.36" size="0.025 0.36"/>
+      <geom name="desk_lamp" class="decor" type="cylinder" pos="-0.4 0.15 0.85" size="0.06 0.1"
+            rgba="0.15 0.55 0.35 1"/>
+      <geom name="desk_laptop" class="decor" type="box" pos="0 0 0.76" size="0.17 0.12 0.005"
+            material="metal"/>
+    </body>
+    <body name="desk_chair" pos="5.45 2.4 0" euler="0 0 -1.5708" childclass="furniture">
+      <geom name="desk_chair_seat" pos="0 0 0.45" size="0.22 0.22 0.03" material="fabric"/>
+      <geom name="desk_chair_back" pos="0 0.2 0.75" size="0.2 0.02 0.27" material="fabric"/>
+      <geom name="desk_chair_post" class="leg" pos="0 0 0.22" size="0.03 0.21"/>
+      <geom name="desk_chair_foot" type="cylinder" pos="0 0 0.02" size="0.25 0.02"
+            material="metal"/>
+    </body>
+""")
+    parts.append(bookshelf(rng))
+    shelf, lo, hi = GAME_BOX_SLOT
+    x, y = BOOKSHELF[0] + (lo + hi) / 2, BOOKSHELF[1] - 0.02
+    z = SHELF_TOPS[shelf] + OBJECTS["game_box"][0][2]
+    parts.append(
+        f'    <body name="game_box" pos="{_f(x, y, z)}" euler="0 0 -1.5708">\n'
+        '      <geom name="game_box" class="game_box"/>\n'
+        "    </body>\n"
+    )
+    parts.append("  </worldbody>\n</mujoco>\n")
+    return "".join(parts)
+
+
+def main(models: Path = HERE, scenes: Path = SCENES) -> None:
+    """Write every output under ``models`` and ``scenes`` (default: where they are committed)."""
+    rng = np.random.default_rng(SEED)
+    tex = models / "textures"
+    _write_png(tex / "tea_tin.png", tea_tin())
+    _write_png(tex / "game_box.png", game_box())
+    _write_png(tex / "toy_crate.png", toy_crate())
+    for name in OBJECTS:
+        (models / f"{name}.xml").write_text(object_xml(name))
+    _write_png(tex / "tiles.png", tiles(rng))
+    _write_png(tex / "carpet.png", noise(rng, (120, 110, 130), 10.0, 0.7))
+    _write_png(tex / "slate.png", noise(rng, (95, 100, 105), 12.0, 2.0))
+    scenes.mkdir(parents=True, exist_ok=True)
+    (scenes / "apartment.xml").write_text(scene_xml(rng))
+
+
+if __name__ == "__main__":
+    main()
