@@ -30,6 +30,7 @@ COMMAND_MODULES: tuple[str, ...] = (
     "twin.commands.batch_survey",
     "twin.commands.devices",
     "twin.commands.map",
+    "twin.commands.calibrate",
 )
 
 
