@@ -14,6 +14,8 @@ import numpy as np
 from twin.core.errors import InputError
 from twin.rfch.params import RFCHParams
 
+_MEAN_RGB = np.full((1, 3), 1.0 / 3.0, dtype=np.float32)
+
 
 def check_image(image: object, what: str = "image") -> np.ndarray:
     """Return ``image`` as an H×W×3 uint8 RGB array or raise a one-line ``InputError``.
@@ -65,38 +67,36 @@ def raw_descriptors(image: np.ndarray, params: RFCHParams, step: int = 1) -> np.
     (0, 0) (see the module docstring for the order); step 1 gives the full H×W×D.
 
     Blurs run on the full frame (the responses must not depend on the step); colour and the
-    cheap per-pixel responses are only computed at the sampled pixels. Derivatives are central
-    differences of the Gaussian-smoothed image, which equal Gaussian-derivative filtering to
-    within the blur's own width at σ ≥ 1 and cost a fraction of it.
+    per-pixel responses are computed only at the sampled pixels, in one compiled pass
+    (``kernels.sampled_responses``). Derivatives are central differences of the
+    Gaussian-smoothed (log) intensity, which equal Gaussian-derivative filtering to within the
+    blur's own width at σ ≥ 1 and cost a fraction of it.
     """
-    picked = image[::step, ::step]
-    planes = cv2.split(picked.astype(np.float32))
-    total = planes[0] + planes[1] + planes[2]
-    dark = total <= 0.0
-    # Black pixels have no chromaticity; give them the neutral grey point instead of 0/0.
-    inverse = 1.0 / np.where(dark, np.float32(1.0), total)
-    channels = [
-        np.where(dark, np.float32(1.0 / 3.0), planes[0] * inverse),
-        np.where(dark, np.float32(1.0 / 3.0), planes[1] * inverse),
-    ]
+    from twin.rfch import kernels
+
+    height, width = image.shape[:2]
     if params.responses:
-        full = cv2.split(image.astype(np.float32))
-        intensity = (full[0] + full[1] + full[2]) * np.float32(1.0 / 3.0)
+        full = image.astype(np.float32)
+        intensity = cv2.transform(full, _MEAN_RGB)  # (R + G + B) / 3 per pixel
         if params.log_intensity:
             intensity = np.log(intensity + np.float32(params.intensity_offset))
         else:
             intensity = intensity * np.float32(1.0 / 255.0)
-        for sigma in params.sigmas:
-            smooth = cv2.GaussianBlur(intensity, (0, 0), sigma, borderType=cv2.BORDER_REFLECT)
-            if "gradient" in params.responses:
-                gx = cv2.Sobel(smooth, cv2.CV_32F, 1, 0, ksize=1, scale=0.5)[::step, ::step]
-                gy = cv2.Sobel(smooth, cv2.CV_32F, 0, 1, ksize=1, scale=0.5)[::step, ::step]
-                # σ-normalised so that scales are comparable before z-scoring.
-                channels.append(cv2.magnitude(gx, gy) * np.float32(sigma))
-            if "laplacian" in params.responses:
-                lap = cv2.Laplacian(smooth, cv2.CV_32F, ksize=1)[::step, ::step]
-                channels.append(lap * np.float32(sigma * sigma))
-    return cv2.merge(channels)
+        smooth = np.empty((len(params.sigmas), height, width), dtype=np.float32)
+        for index, sigma in enumerate(params.sigmas):
+            cv2.GaussianBlur(
+                intensity, (0, 0), sigma, dst=smooth[index], borderType=cv2.BORDER_REFLECT
+            )
+    else:
+        smooth = np.empty((0, height, width), dtype=np.float32)
+    return kernels.sampled_responses(
+        image,
+        smooth,
+        np.asarray(params.sigmas, dtype=np.float64),
+        "gradient" in params.responses,
+        "laplacian" in params.responses,
+        step,
+    )
 
 
 def sample(array: np.ndarray, step: int) -> np.ndarray:

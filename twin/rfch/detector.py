@@ -11,7 +11,8 @@ that would make one object's scores depend on which other objects are loaded.
 from __future__ import annotations
 
 import time
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
+from typing import Any
 
 import numpy as np
 
@@ -54,9 +55,51 @@ class Detector:
             ).astype(np.int64)
             self._groups.append((members, np.ascontiguousarray(histograms), owners))
 
+    @classmethod
+    def train(
+        cls,
+        objects: Mapping[str, tuple[Sequence[np.ndarray], Sequence[np.ndarray]]],
+        **params: Any,
+    ) -> Detector:
+        """Train every object on ONE shared codebook: {name: (images, masks)} → a Detector.
+
+        The natural way to detect several objects, and the fast one: each frame is labelled and
+        its pairs counted once for all objects, so each extra object costs one histogram
+        intersection per patch (docs/rfch.md). Keyword arguments are ``RFCHParams`` fields.
+        Per-object models (``detector.models``) save and load like any ``RFCH``, and a Detector
+        of the loaded files shares the codebook again (it groups models by ``codebook_key``).
+        """
+        return cls(RFCH.train_shared(objects, **params))
+
+    def add(
+        self,
+        name: str,
+        images: Sequence[np.ndarray],
+        masks: Sequence[np.ndarray],
+        views: str | None = None,
+    ) -> Detector:
+        """A new Detector with one more object, trained on this detector's (first) codebook.
+
+        Only the new object's histogram is built; the codebook is not re-clustered, so the
+        scores of the objects already here do not change, and the new object costs one
+        intersection per patch. Its colours are only those the codebook already knows: an
+        object unlike all the others is better trained with them (``Detector.train``).
+        ``views`` optionally overrides the view mode ("merged", "per_view", "clustered").
+        """
+        if name in self.names:
+            raise InputError(f"the detector already has an object named {name!r}; pick another")
+        extra = {} if views is None else {"views": views}
+        model = RFCH.train(name, images, masks, codebook=self.models[0], **extra)
+        return Detector([*self.models, model], self.share_cells)
+
     @property
     def names(self) -> list[str]:
         return [model.name for model in self.models]
+
+    @property
+    def n_codebooks(self) -> int:
+        """How many distinct codebooks the frame is labelled against (1 when all shared)."""
+        return len(self._groups)
 
     def patch_boxes(self, shape: tuple[int, ...]) -> np.ndarray:
         """(rows, cols, 4) patch boxes [x0, y0, x1, y1] in px for a frame of ``shape``."""

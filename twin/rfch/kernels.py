@@ -45,6 +45,65 @@ def half_widths(d_max: float, step: int) -> np.ndarray:
     )
 
 
+@numba.njit(cache=True, nogil=True)
+def sampled_responses(
+    image: np.ndarray,  # (H, W, 3) uint8 RGB
+    smooth: np.ndarray,  # (S, H, W) float32 Gaussian-smoothed intensity, one plane per sigma
+    sigmas: np.ndarray,  # (S,) float64
+    gradient: bool,
+    laplacian: bool,
+    step: int,
+) -> np.ndarray:
+    """(h, w, D) float32 raw descriptor at every ``step``-th pixel, in one pass.
+
+    [r, g, then per sigma σ·|∇L| and/or σ²·∇²L]; derivatives are central differences with the
+    border mirrored about the edge pixel (OpenCV's default BORDER_REFLECT_101, what the
+    Sobel/Laplacian calls this replaces used), computed only where they are sampled.
+    """
+    height, width = image.shape[0], image.shape[1]
+    h = (height + step - 1) // step
+    w = (width + step - 1) // step
+    n_responses = int(gradient) + int(laplacian)
+    out = np.empty((h, w, 2 + n_responses * smooth.shape[0]), dtype=np.float32)
+    third = np.float32(1.0 / 3.0)
+    half = np.float32(0.5)
+    for i in range(h):
+        y = i * step
+        up = y - 1 if y > 0 else min(1, height - 1)
+        down = y + 1 if y < height - 1 else max(height - 2, 0)
+        for j in range(w):
+            x = j * step
+            red = np.float32(image[y, x, 0])
+            green = np.float32(image[y, x, 1])
+            total = red + green + np.float32(image[y, x, 2])
+            if total <= 0.0:  # black has no chromaticity: the neutral grey point
+                out[i, j, 0] = third
+                out[i, j, 1] = third
+            else:
+                inverse = np.float32(1.0) / total
+                out[i, j, 0] = red * inverse
+                out[i, j, 1] = green * inverse
+            left = x - 1 if x > 0 else min(1, width - 1)
+            right = x + 1 if x < width - 1 else max(width - 2, 0)
+            d = 2
+            for s in range(smooth.shape[0]):
+                plane = smooth[s]
+                sigma = np.float32(sigmas[s])
+                centre = plane[y, x]
+                if gradient:
+                    gx = (plane[y, right] - plane[y, left]) * half
+                    gy = (plane[down, x] - plane[up, x]) * half
+                    out[i, j, d] = np.sqrt(gx * gx + gy * gy) * sigma
+                    d += 1
+                if laplacian:
+                    lap = (
+                        plane[up, x] + plane[y, left] + plane[y, right] + plane[down, x]
+                    ) - np.float32(4.0) * centre
+                    out[i, j, d] = lap * (sigma * sigma)
+                    d += 1
+    return out
+
+
 @numba.njit(cache=True, fastmath=True, nogil=True, inline="always")
 def _distances(z, by_dim, dist):
     """Squared distances from ``z`` to every centre (by_dim: D×K centres) into ``dist``."""
@@ -94,29 +153,43 @@ def label_samples(
 ) -> np.ndarray:
     """(h, w) int32 nearest-centre labels, -1 where the nearest centre is beyond its radius.
 
-    Most pixels of a frame are background for any one object. If every centre is farther than
-    its own radius, so is the nearest one: one vectorized pass over (distance - radius²) settles
-    those pixels without the (scalar) search for the nearest centre. Same labels, ~2× faster.
+    One sample row at a time, laid out dimension-major, and centre by centre: every inner loop
+    runs over the row's samples, so it is SIMD over pixels (the squared distance summed over
+    dimensions in the same order as ``nearest_centres``, strict ``<`` keeps the first minimum).
+    1.6× faster than searching pixel by pixel with an early-out for background; same labels.
     """
     h, w, dims = descriptors.shape
     n_centres = centres.shape[0]
-    by_dim = np.ascontiguousarray(centres.T)
-    dist = np.empty(n_centres, dtype=np.float32)
-    z = np.empty(dims, dtype=np.float32)
-    labels = np.full((h, w), -1, dtype=np.int32)
+    labels = np.empty((h, w), dtype=np.int32)
+    z = np.empty((dims, w), dtype=np.float32)
+    dist = np.empty(w, dtype=np.float32)
+    best = np.empty(w, dtype=np.float32)
+    best_k = np.empty(w, dtype=np.int32)
     for y in range(h):
+        for d in range(dims):
+            o = offset[d]
+            s = scale[d]
+            for x in range(w):
+                z[d, x] = (descriptors[y, x, d] - o) * s
+        best[:] = np.inf
+        best_k[:] = 0
+        for k in range(n_centres):
+            c = centres[k, 0]
+            for x in range(w):
+                t = z[0, x] - c
+                dist[x] = t * t
+            for d in range(1, dims):
+                c = centres[k, d]
+                for x in range(w):
+                    t = z[d, x] - c
+                    dist[x] += t * t
+            for x in range(w):
+                closer = dist[x] < best[x]
+                best[x] = dist[x] if closer else best[x]
+                best_k[x] = k if closer else best_k[x]
         for x in range(w):
-            for d in range(dims):
-                z[d] = (descriptors[y, x, d] - offset[d]) * scale[d]
-            _distances(z, by_dim, dist)
-            margin = dist[0] - radius2[0]
-            for k in range(1, n_centres):
-                margin = min(margin, dist[k] - radius2[k])
-            if margin > 0.0:
-                continue  # no centre accepts it: background whichever is nearest
-            best_k, best = _first_minimum(dist)
-            if best <= radius2[best_k]:
-                labels[y, x] = best_k
+            k = best_k[x]
+            labels[y, x] = k if best[x] <= radius2[k] else -1
     return labels
 
 
@@ -244,11 +317,10 @@ def cell_patch_scores(
     n_rel = (rc + 1) * side
     ny = (h + cell - 1) // cell
     nx = (w + cell - 1) // cell
-    cell_of_x = np.empty(w, dtype=np.int64)
-    for x in range(w):
-        cell_of_x[x] = x // cell
-
-    # Phase 1: every pair once, into per-group sparse lists (CSR over groups).
+    # Phase 1: every pair once, into per-group sparse lists (CSR over groups). Branch-light:
+    # background partners count into a sentinel label n_labels (dropped when a cell's groups
+    # are written out), and a new bin is recorded by always writing its slot and advancing the
+    # list only if it was empty — both branches were unpredictable on a cluttered frame.
     n_labelled = 0
     for y in range(h):
         for x in range(w):
@@ -261,12 +333,23 @@ def cell_patch_scores(
     group_start = np.zeros(ny * nx * n_rel + 1, dtype=np.int64)
     entry_bin = np.empty(capacity, dtype=np.int32)
     entry_count = np.empty(capacity, dtype=np.int32)
-    scratch = np.zeros(n_rel * n_bins, dtype=np.int32)
-    touched = np.empty((n_rel, n_bins), dtype=np.int32)
-    n_touched = np.zeros(n_rel, dtype=np.int64)
+    side_k = n_labels + 1  # labels plus the sentinel
+    n_slots = side_k * side_k
+    marked = np.empty((h, w), dtype=np.int32)
+    for y in range(h):
+        for x in range(w):
+            marked[y, x] = labels[y, x] if labels[y, x] >= 0 else n_labels
+    cell_slot = np.empty(w, dtype=np.int64)
+    for x in range(w):
+        cell_slot[x] = (x // cell) * n_slots
+    scratch = np.zeros(n_rel * n_slots, dtype=np.int32)
+    touched = np.empty(n_rel * n_slots + 1, dtype=np.int64)
+    per_group = np.zeros(n_rel + 1, dtype=np.int64)
+    fill = np.zeros(n_rel, dtype=np.int64)
     position = 0
     for cy in range(ny):
         for cx in range(nx):
+            n_touched = 0
             for y in range(cy * cell, min((cy + 1) * cell, h)):
                 for x in range(cx * cell, min((cx + 1) * cell, w)):
                     a = labels[y, x]
@@ -276,36 +359,45 @@ def cell_patch_scores(
                         yy = y + dy
                         if yy >= h:
                             break
-                        row_rel = (yy // cell - cy) * side + rc - cx
+                        row_slot = ((yy // cell - cy) * side + rc - cx) * n_slots
                         half = widths[dy]
                         lo = x + 1 if dy == 0 else max(0, x - half)
                         hi = min(w, x + half + 1)
                         for xx in range(lo, hi):
-                            b = labels[yy, xx]
-                            if b < 0:
-                                continue
-                            index = a * n_labels + b if a <= b else b * n_labels + a
-                            rel = row_rel + cell_of_x[xx]
-                            slot = rel * n_bins + index
-                            if scratch[slot] == 0:
-                                touched[rel, n_touched[rel]] = index
-                                n_touched[rel] += 1
+                            b = marked[yy, xx]
+                            small = min(a, b)
+                            slot = row_slot + cell_slot[xx] + small * side_k + (a + b - small)
+                            touched[n_touched] = slot
+                            n_touched += scratch[slot] == 0
                             scratch[slot] += 1
+            # Write the cell's groups out in group order (a counting sort of the touched slots).
+            per_group[:] = 0
+            for t in range(n_touched):
+                slot = touched[t]
+                if slot % side_k < n_labels:  # not a pair with the sentinel
+                    per_group[slot // n_slots + 1] += 1
             first_group = (cy * nx + cx) * n_rel
             for rel in range(n_rel):
-                group_start[first_group + rel] = position
-                for t in range(n_touched[rel]):
-                    slot = rel * n_bins + touched[rel, t]
-                    entry_bin[position] = touched[rel, t]
-                    entry_count[position] = scratch[slot]
-                    scratch[slot] = 0
-                    position += 1
-                n_touched[rel] = 0
+                per_group[rel + 1] += per_group[rel]  # now: where each group's entries start
+                group_start[first_group + rel] = position + per_group[rel]
+                fill[rel] = position + per_group[rel]
+            for t in range(n_touched):
+                slot = touched[t]
+                rel = slot // n_slots
+                index = slot - rel * n_slots
+                i = index // side_k
+                j = index - i * side_k
+                if j < n_labels:
+                    entry_bin[fill[rel]] = i * n_labels + j
+                    entry_count[fill[rel]] = scratch[slot]
+                    fill[rel] += 1
+                scratch[slot] = 0
+            position += per_group[n_rel]
     group_start[ny * nx * n_rel] = position
 
     # Phase 2: each patch sums the groups inside it, then intersects with the model.
     patch = np.zeros(n_bins, dtype=np.int64)
-    patch_touched = np.empty(n_bins, dtype=np.int64)
+    patch_touched = np.empty(n_bins + 1, dtype=np.int64)
     out = np.zeros((n_objects, row_cells.shape[0], col_cells.shape[0]), dtype=np.float32)
     for r in range(row_cells.shape[0]):
         cy0 = row_cells[r]
@@ -320,9 +412,8 @@ def cell_patch_scores(
                             group = (cy * nx + cx) * n_rel + dcy * side + dcx + rc
                             for e in range(group_start[group], group_start[group + 1]):
                                 index = entry_bin[e]
-                                if patch[index] == 0:
-                                    patch_touched[count_touched] = index
-                                    count_touched += 1
+                                patch_touched[count_touched] = index  # kept only if new
+                                count_touched += patch[index] == 0
                                 patch[index] += entry_count[e]
                                 total += entry_count[e]
             if total > 0:
