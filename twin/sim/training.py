@@ -15,8 +15,8 @@ the detector's score distributions on and off the object (``twin.rfch.calibratio
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
-from typing import NamedTuple
+from collections.abc import Callable, Sequence
+from typing import Any, NamedTuple
 
 import mujoco
 import numpy as np
@@ -30,6 +30,10 @@ from twin.sim.world import World
 
 DEFAULT_DISTANCES = (1.0, 1.5, 2.0, 3.0)
 DEFAULT_ANGLES = tuple(2.0 * math.pi * k / 8 for k in range(8))
+# Camera heights over the target's centre (m) that a robot with its camera at 1.0 m sees objects
+# from: on the floor (seen from above), on a 0.45 m coffee table (the one-drop default), on a
+# 0.9 m counter (nearly level) and on a 1.5 m shelf (from below).
+ELEVATION_DROPS = (0.9, 0.4, 0.0, -0.5)
 # Placement i of calibration uses np.random.default_rng(CALIBRATION_SEED + i) (by default):
 # seeds 900_000 to 900_999 are reserved for calibration, and evaluation runs (random target
 # placements in twin.app.run / batch) must use other seeds, or the detector would be scored on
@@ -41,26 +45,30 @@ ROBOT_CLEARANCE = 0.35  # metres from walls and furniture: the Peoplebot's radiu
 def training_views(
     distances: Sequence[float] = DEFAULT_DISTANCES,
     angles: Sequence[float] = DEFAULT_ANGLES,
-    camera_drop: float = 0.4,
+    camera_drop: float | Sequence[float] = 0.4,
     target: str | None = None,
     scene: str = "training_stage",
     width: int = 320,
     height: int = 240,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Render the target from every (distance, angle) pair.
+    """Render the target from every (camera drop, distance, angle).
 
     ``distances`` are horizontal ranges in metres; ``angles`` (radians) place the camera around
-    the target, measured in the target's frame from its printed front (+x) counter-clockwise.
-    Returns ``images`` (N, H, W, 3) uint8 RGB and ``masks`` (N, H, W) bool, N = distances x
-    angles, distance-major.
+    the target, measured in the target's frame from its printed front (+x) counter-clockwise;
+    ``camera_drop`` is how far (m) the camera is above the target's centre — one value, or
+    several for views from several elevations (negative: from below; ``ELEVATION_DROPS``).
+    Returns ``images`` (N, H, W, 3) uint8 RGB and ``masks`` (N, H, W) bool, N = drops x
+    distances x angles, drop-major then distance-major.
     """
-    if not distances or not angles:
-        raise InputError("training_views needs at least one distance and one angle")
+    drops = (camera_drop,) if isinstance(camera_drop, int | float) else tuple(camera_drop)
+    if not distances or not angles or not drops:
+        raise InputError("training_views needs at least one distance, angle and camera drop")
     for d in distances:
         if not (math.isfinite(d) and 0.2 <= d <= 10.0):
             raise InputError(f"training distance {d!r} m is outside [0.2, 10] m")
-    if not (math.isfinite(camera_drop) and abs(camera_drop) < 3.0):
-        raise InputError(f"camera_drop {camera_drop!r} m must be finite and within 3 m")
+    for drop in drops:
+        if not (isinstance(drop, int | float) and math.isfinite(drop) and abs(drop) < 3.0):
+            raise InputError(f"camera_drop {drop!r} m must be finite and within 3 m")
     world = World(scene)
     target = target or (world.targets() or (None,))[0]
     if target is None:
@@ -75,14 +83,15 @@ def training_views(
     camera.lookat[:] = centre
     images, masks = [], []
     with FrameRenderer(world.model, width, height) as renderer:
-        for distance in distances:
-            camera.distance = math.hypot(distance, camera_drop)
-            camera.elevation = -math.degrees(math.atan2(camera_drop, distance))
-            for angle in angles:
-                # MuJoCo's azimuth is the direction the camera looks, in degrees
-                camera.azimuth = math.degrees(yaw + angle + math.pi)
-                images.append(renderer.render(world.data, camera))
-                masks.append(np.isin(renderer.segment(world.data, camera), geoms))
+        for drop in drops:
+            for distance in distances:
+                camera.distance = math.hypot(distance, drop)
+                camera.elevation = -math.degrees(math.atan2(drop, distance))
+                for angle in angles:
+                    # MuJoCo's azimuth is the direction the camera looks, in degrees
+                    camera.azimuth = math.degrees(yaw + angle + math.pi)
+                    images.append(renderer.render(world.data, camera))
+                    masks.append(np.isin(renderer.segment(world.data, camera), geoms))
     return np.stack(images), np.stack(masks)
 
 
@@ -109,6 +118,7 @@ def calibration_views(
     width: int = PAPER_CAMERA.width,
     height: int = PAPER_CAMERA.height,
     lighting: tuple[float, float] = (1.0, 1.0),
+    effects: Effects | None = None,
 ) -> CalibrationViews:
     """Head-camera frames of ``scene`` with the target at random furniture tops, and its masks.
 
@@ -123,6 +133,16 @@ def calibration_views(
 
     Each placement's lights are scaled by a factor drawn uniformly from ``lighting`` (the
     survey's frames will not be lit as the calibration's were).
+
+    ``effects`` passes every frame through a camera: ``effects(image, depth, rng) -> (image,
+    depth)`` (its ``rng`` is seeded from the placement's seed, apart from the poses' so that
+    they stay the same), or an object with such an ``apply`` (e.g.
+    ``twin.sim.camera_effects.CameraEffects``), so that the calibration sees the frames the
+    survey sees (default None: clean frames). If it (or the object of a bound ``apply``) has a
+    lens (``settings.lens``), frames are rendered at its ``canvas_size`` and ``canvas_fovy``
+    and bent to ``width`` x ``height`` by it. The mask follows the depth through it (object
+    pixels travel as negated depths), so the effects must move depth pixels without blending
+    their values, as a nearest-neighbour lens remap does.
 
     Returns ``images`` (N, H, W, 3) uint8 RGB, ``masks`` (N, H, W) bool (the target's pixels,
     from segmentation), ``distances`` (N,) metres in the plan from the robot to the target,
@@ -146,9 +166,14 @@ def calibration_views(
     half_fov = 0.5 * PAPER_CAMERA.hfov
     aimed = round(aimed_fraction * views_per_placement)
     images, masks, distances, depths, poses = [], [], [], [], []
-    with FrameRenderer(world.model, width, height, CAMERA_NAME) as renderer:
+    apply, canvas, fovy = _effects_chain(effects, width, height)
+    saved_fovy = float(world.model.cam_fovy[robot.camera_id])
+    with FrameRenderer(world.model, *canvas, CAMERA_NAME) as renderer:
         for i in range(n_placements):
             rng = np.random.default_rng(seed + i)
+            # The camera's own randomness (noise) has its own stream, so that the poses and
+            # placements are the same with effects as without.
+            camera_rng = np.random.default_rng([seed + i, 1])
             spot = random_surface_pose(world, target, rng)
             world.scale_lighting(float(rng.uniform(*lighting)))
             for k in range(views_per_placement):
@@ -159,14 +184,69 @@ def calibration_views(
                     yaw = rng.uniform(-math.pi, math.pi)
                 # No settling: only the pose matters for a frame, and physics would cost time.
                 robot.place(Pose2D(x, y, float(yaw)), settle=0.0)
-                images.append(renderer.render(world.data))
-                masks.append(np.isin(renderer.segment(world.data), geoms))
-                depths.append(renderer.depth(world.data))
+                if fovy is not None:  # the effects' wider canvas, for this render only
+                    world.model.cam_fovy[robot.camera_id] = math.degrees(fovy)
+                try:
+                    image = renderer.render(world.data)
+                    mask = np.isin(renderer.segment(world.data), geoms)
+                    depth = renderer.depth(world.data)
+                finally:
+                    world.model.cam_fovy[robot.camera_id] = saved_fovy
+                if apply is not None:
+                    frame = _through(apply, image, mask, depth, camera_rng, (width, height))
+                    image, mask, depth = frame
+                images.append(image)
+                masks.append(mask)
+                depths.append(depth)
                 distances.append(math.dist((x, y), (spot.x, spot.y)))
                 poses.append((x, y, float(yaw)))
     return CalibrationViews(
         np.stack(images), np.stack(masks), np.array(distances), np.stack(depths), np.array(poses)
     )
+
+
+Effects = Callable[..., tuple[np.ndarray, np.ndarray | None]] | Any
+"""``effects(image, depth, rng) -> (image, depth)``, or an object with such an ``apply``."""
+
+
+def _effects_chain(
+    effects: Effects | None, width: int, height: int
+) -> tuple[Callable[..., Any] | None, tuple[int, int], float | None]:
+    """(the callable, the canvas (width, height) px to render at, its fovy in rad or None)."""
+    if effects is None:
+        return None, (width, height), None
+    apply = effects.apply if hasattr(effects, "apply") else effects
+    if not callable(apply):
+        raise InputError(
+            f"effects must be callable as effects(image, depth, rng) or have such an apply, "
+            f"got {type(effects).__name__}"
+        )
+    owner = effects if hasattr(effects, "apply") else getattr(effects, "__self__", None)
+    settings = getattr(owner, "settings", None)
+    if settings is not None and getattr(settings, "lens", None) is not None:
+        return apply, tuple(owner.canvas_size), float(owner.canvas_fovy)
+    return apply, (width, height), None
+
+
+def _through(
+    apply: Callable[..., Any],
+    image: np.ndarray,
+    mask: np.ndarray,
+    depth: np.ndarray,
+    rng: np.random.Generator,
+    size: tuple[int, int],
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """One frame, its mask and depth through the camera effects (see ``calibration_views``)."""
+    signed = np.where(mask, -depth, depth)  # object pixels always have a finite depth
+    image, signed = apply(image, signed, rng)
+    width, height = size
+    if image.shape != (height, width, 3) or signed is None or signed.shape != (height, width):
+        raise InputError(
+            f"camera effects returned a {image.shape} frame and a "
+            f"{None if signed is None else signed.shape} depth; expected {height}x{width}"
+        )
+    mask = signed < 0.0
+    return image, mask, np.where(mask, -signed, signed)
 
 
 def _free_floor_point(
