@@ -14,7 +14,6 @@ from twin.core.geometry import CameraModel
 from twin.core.height import (
     best_patch_elevations,
     estimate_height,
-    pixel_elevations,
     weighted_median,
 )
 from twin.rfch.params import PatchGrid
@@ -42,21 +41,15 @@ def test_the_ray_through_a_pixel_rises_to_the_point_it_shows(tilt_deg):
         u, v = project(CAMERA, point, 1.0, tilt)
         if not (0 <= u < CAMERA.width and 0 <= v < CAMERA.height):
             continue
-        elevation = pixel_elevations(CAMERA, np.array(u), np.array(v), tilt)
+        elevation = CAMERA.pixel_rays(np.array(u), np.array(v), tilt)[1]
         expected = math.atan2(point[2] - 1.0, math.hypot(point[0], point[1]))
         assert float(elevation) == pytest.approx(expected, abs=1e-9)
 
 
 def test_the_image_centre_looks_along_the_tilt():
     for tilt in (-0.4, 0.0, 0.3):
-        assert float(pixel_elevations(CAMERA, np.array(160.0), np.array(120.0), tilt)) == (
-            pytest.approx(tilt)
-        )
-
-
-def test_a_tilt_beyond_vertical_is_refused():
-    with pytest.raises(InputError, match="tilt"):
-        pixel_elevations(CAMERA, np.array(1.0), np.array(1.0), 2.0)
+        _, elevation = CAMERA.pixel_rays(np.array(160.0), np.array(120.0), tilt)
+        assert float(elevation) == pytest.approx(tilt)
 
 
 def test_a_bump_over_two_rows_has_its_centre_between_them():
@@ -70,8 +63,8 @@ def test_a_bump_over_two_rows_has_its_centre_between_them():
     u3 = 0.5 * (boxes[0, 3, 0] + boxes[0, 3, 2])
     u7 = 0.5 * (boxes[0, 7, 0] + boxes[0, 7, 2])
     v9 = 0.5 * (boxes[9, 7, 1] + boxes[9, 7, 3])
-    assert elevations[0, 3] == pytest.approx(pixel_elevations(CAMERA, u3, v_between, 0.0))
-    assert elevations[0, 7] == pytest.approx(pixel_elevations(CAMERA, u7, v9, 0.0))
+    assert elevations[0, 3] == pytest.approx(CAMERA.pixel_rays(u3, v_between)[1])
+    assert elevations[0, 7] == pytest.approx(CAMERA.pixel_rays(u7, v9)[1])
 
 
 def test_scores_that_do_not_fit_the_patch_grid_are_refused():

@@ -325,7 +325,7 @@ class Mission:
             values = scores.max(axis=1)  # a column's match: its best patch
             camera = robot.camera.model
             spans = self.detector.column_spans(view.image.shape[1])
-            wedges = camera.wedges(view.pose, view.pan, spans)
+            wedges = camera.wedges(view.pose, view.pan, spans, view.tilt)
             boxes = self.detector.patch_boxes(view.image.shape)
             elevations = best_patch_elevations(scores, boxes, camera, view.tilt)
         with self._timed("visibility"):

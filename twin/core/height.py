@@ -1,15 +1,15 @@
 """An object's height from the rows its best patches were found in, across views.
 
 The grid gives an object's place on the floor plan; the patch rows give the rest. In each view,
-the column that looks toward the plan estimate has a best-matching patch row, and that row's
-centre is a ray at a known elevation (through the camera's tilt and optics). At the estimate's
-horizontal distance ``d`` from the camera, the ray is at height ``camera_height + d tan(e)``.
-One view's answer is coarse (patch rows are 16 px apart: 2.3 degrees, 0.12 m at 3 m) and a view
-that does not really see the object answers at random, so the height is the weighted median over
-views, each weighted by how much its column stands out from the rest of its frame (its match
-above the frame's median column), times what the camera could see there (the visibility
-profile, when the mission has one). The best row is refined between rows by a parabola through
-its neighbours' scores, which dithers the row quantization out over views at several distances.
+the column that looks toward the plan estimate has a best-matching bump of patch rows, and the
+bump's centre is a ray at a known elevation (``CameraModel.pixel_rays``: through the tilt and
+the lens). At the estimate's horizontal distance ``d`` from the camera, the ray is at height
+``camera_height + d tan(e)``. One view's answer is coarse (patch rows are 16 px apart: 2.3
+degrees, 0.12 m at 3 m) and a view that does not really see the object answers at random, so
+the height is the weighted median over views, each weighted by how much its column stands out
+from the rest of its frame (its match above the frame's median column), by what the camera
+could see there (the visibility profile, when the mission has one) and by its nearness (a
+row's error in height grows with the distance).
 
 Angles in radians, lengths in metres; elevation is positive above the horizontal.
 """
@@ -23,22 +23,6 @@ import numpy as np
 
 from twin.core.errors import InputError
 from twin.core.geometry import CameraModel
-
-
-def pixel_elevations(camera: CameraModel, u: np.ndarray, v: np.ndarray, tilt: float) -> np.ndarray:
-    """Elevation above the horizontal (radians) of the rays through pixels (``u``, ``v``) of a
-    camera tilted by ``tilt`` (radians, positive up); pixel coordinates are continuous, (0, 0)
-    the top-left corner of the frame."""
-    require = np.isfinite(tilt) and abs(tilt) < math.pi / 2
-    if not require:
-        raise InputError(f"camera tilt must be within +-90 degrees, got {tilt!r} rad")
-    f = camera.focal_px
-    right = (np.asarray(u, dtype=float) - camera.width / 2.0) / f
-    up = (camera.height / 2.0 - np.asarray(v, dtype=float)) / f
-    # The ray (forward 1, left -right, up) turned up by the tilt about the camera's left axis.
-    ahead = math.cos(tilt) - up * math.sin(tilt)
-    rise = math.sin(tilt) + up * math.cos(tilt)
-    return np.arctan2(rise, np.hypot(ahead, right))
 
 
 def best_patch_elevations(
@@ -62,7 +46,7 @@ def best_patch_elevations(
     # interpolate the pixel row through them.
     v = np.interp(rows, np.arange(n_rows), centre_v)
     u = np.broadcast_to(centre_u, v.shape)
-    return pixel_elevations(camera, u, v, tilt)
+    return camera.pixel_rays(u, v, tilt)[1]
 
 
 def _bump_centres(scores: np.ndarray) -> np.ndarray:
@@ -127,38 +111,40 @@ def estimate_height(
     given, weigh each view by what its camera could see at the target's distance. None when
     no view looks toward the target.
     """
-    tx, ty = target
-    heights, weights = [], []
-    for i in range(len(origins)):
-        dx, dy = tx - origins[i, 0], ty - origins[i, 1]
-        distance = math.hypot(dx, dy)
-        if distance < 1e-6 or (max_range is not None and distance > max_range):
-            continue
-        bearing = math.atan2(dy, dx)
-        lo, hi = wedges[i, :, 0], wedges[i, :, 1]
-        # wrap the bearing into each wedge's turn
-        shifted = lo + np.mod(bearing - lo, 2.0 * math.pi)
-        inside = np.flatnonzero(shifted <= hi)
-        if inside.size == 0:
-            continue
-        column = inside[np.argmax(values[i, inside])]
-        elevation = elevations[i, column]
-        if not math.isfinite(elevation):
-            continue
-        weight = float(values[i, column] - np.median(values[i]))
-        if visibility is not None and visibility[i] is not None and visibility_step is not None:
-            profile = visibility[i][column]
-            b = int(distance / visibility_step[i])
-            weight *= float(profile[b]) if b < len(profile) else 0.0
-        if weight <= 0.0:
-            continue
-        # A row's error in height grows with the distance: nearer views say more.
-        weight /= distance
-        heights.append(camera_heights[i] + distance * math.tan(elevation))
-        weights.append(weight)
-    if not heights:
+    origins = np.asarray(origins, dtype=float).reshape(-1, 2)
+    if len(origins) == 0:
         return None
-    z, w = np.array(heights), np.array(weights)
-    median = weighted_median(z, w)
-    spread = weighted_median(np.abs(z - median), w)
-    return HeightEstimate(median, len(z), spread)
+    values = np.asarray(values, dtype=float)
+    dx, dy = target[0] - origins[:, 0], target[1] - origins[:, 1]
+    distance = np.hypot(dx, dy)
+    bearing = np.arctan2(dy, dx)
+    lo, hi = wedges[..., 0], wedges[..., 1]
+    # the bearing wrapped into each wedge's turn: inside when it does not pass the far edge
+    inside = lo + np.mod(bearing[:, None] - lo, 2.0 * math.pi) <= hi
+    near = distance > 1e-6
+    if max_range is not None:
+        near &= distance <= max_range
+    looking = inside.any(axis=1) & near
+    column = np.argmax(np.where(inside, values, -np.inf), axis=1)
+    rows = np.arange(len(origins))
+    elevation = np.asarray(elevations, dtype=float)[rows, column]
+    weight = values[rows, column] - np.median(values, axis=1)
+    if visibility is not None and visibility_step is not None:
+        for i in np.flatnonzero(looking):
+            if visibility[i] is None or visibility_step[i] <= 0.0:
+                continue
+            profile = visibility[i][column[i]]
+            b = int(distance[i] / visibility_step[i])
+            weight[i] *= float(profile[b]) if b < len(profile) else 0.0
+    # A row's error in height grows with the distance: nearer views say more.
+    weight = weight / np.maximum(distance, 1e-6)
+    voting = looking & np.isfinite(elevation) & (weight > 0.0)
+    if not voting.any():
+        return None
+    heights = np.asarray(camera_heights, dtype=float)[voting] + distance[voting] * np.tan(
+        elevation[voting]
+    )
+    weights = weight[voting]
+    median = weighted_median(heights, weights)
+    spread = weighted_median(np.abs(heights - median), weights)
+    return HeightEstimate(median, len(heights), spread)
