@@ -148,8 +148,9 @@ class CameraModel:
         return np.arctan(-x)
 
     def bearing_column(self, bearing: float | np.ndarray) -> float | np.ndarray:
-        """Pixel column that sees ``bearing`` (radians relative to the optical axis), on the
-        principal row through a lens."""
+        """Pixel column that sees ``bearing`` (radians relative to the optical axis); through a
+        lens, where the level ray of that bearing lands (the inverse of ``column_bearing`` but for
+        the bend tangential distortion gives the principal row: 1e-4 px for the VC-C4's)."""
         b = np.asarray(bearing, dtype=float)
         if self.lens is None:
             return self.width / 2.0 - self.focal_px * np.tan(b)
