@@ -145,8 +145,9 @@ def board_poses(count: int, seed: int) -> Iterator[tuple[np.ndarray, np.ndarray]
     """Where the twin's board goes, relative to the camera: (centre, rotation) pairs with the
     centre in the camera's frame (x right, y up, z back, as MuJoCo's cameras) and the rotation
     the board's axes in that frame. The board sweeps the frame (centres out to the edges, where
-    the distortion shows) at 1.1-1.8 m, turned up to 30 degrees about both of its axes, as the
-    OpenCV tutorial asks of a person holding it."""
+    the distortion shows) at 1.1-1.8 m, turned up to 40 degrees about both of its axes, as the
+    OpenCV tutorial asks of a person holding it: the steep views pin down the focal length (at
+    up to 30 degrees it came out 0.2 % off in the twin, at 40 within 0.05 %)."""
     rng = np.random.default_rng(seed)
     spots = [(0.0, 0.0), (-0.22, 0.0), (0.22, 0.0), (0.0, -0.15), (0.0, 0.15), (-0.2, -0.14),
              (0.2, -0.14), (-0.2, 0.14), (0.2, 0.14), (-0.12, 0.06), (0.12, -0.06)]  # fmt: skip
@@ -155,7 +156,7 @@ def board_poses(count: int, seed: int) -> Iterator[tuple[np.ndarray, np.ndarray]
         distance = rng.uniform(1.1, 1.8)
         # tan of the angle off the axis; the board (0.72 x 0.54 m) must fit inside the frame
         centre = np.array([sx * distance, sy * distance, -distance])
-        yaw, pitch = np.radians(rng.uniform(-30.0, 30.0, size=2))
+        yaw, pitch = np.radians(rng.uniform(-40.0, 40.0, size=2))
         roll = np.radians(rng.uniform(-10.0, 10.0))
         yield centre, _rotation(yaw, pitch, roll)
 
