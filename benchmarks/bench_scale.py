@@ -137,8 +137,8 @@ def run_case(extent, n_objects: int, n_views: int, detector: Detector, seed: int
                 log.height(name, (best.x, best.y))
             stages["results"].append(clock() - t)
             t = clock()
-            grid.save(out / "grid.npz")
-            log.save(out / "views.npz")
+            grid.save(out / "grid.npz", compress=False)  # as Checkpoint.save does
+            log.save(out / "views.npz", compress=False)
             stages["checkpoint"].append(clock() - t)
         log_bytes = (out / "views.npz").stat().st_size
     later = n_views // 2

@@ -242,3 +242,39 @@ def test_a_run_the_robot_cannot_finish_is_a_failed_run_not_a_failed_batch(
         assert entry["views"] == 1 and "contact" in entry["failed"]
     with (out / "summary.csv").open() as handle:
         assert [r["success"] for r in csv.DictReader(handle)] == ["0", "0"]
+
+
+def test_the_report_scores_every_object_in_the_plan_and_in_height():
+    """Two objects in two runs: each object's own row and rate; a height tolerance fails an
+    object whose height is off or unknown, however good its plan estimate."""
+    from twin.app.batch import BatchSpec
+    from twin.app.batch_report import summarize, summary_rows
+
+    def entry(error, height_error):
+        out = {"estimate_m": [1.0, 2.0, 0.5], "truth_m": [1.1, 2.0, 0.6], "error_m": error,
+               "peak": 1.0, "peak_ratio": 2.0}  # fmt: skip
+        if height_error is not None:
+            out["height_error_m"] = height_error
+        return out
+
+    timings = dict.fromkeys(("setup", "move", "capture", "detect", "fuse", "mission"), 1.0)
+    results = [
+        {"run": 0, "lighting": 1.0, "threshold": 0.0, "views": 40, "reused_world": False,
+         "timings_s": timings, "objects": {"box": entry(0.1, 0.05), "tin": entry(0.2, 0.3)}},
+        {"run": 1, "lighting": 1.0, "threshold": 0.0, "views": 40, "reused_world": True,
+         "timings_s": timings, "objects": {"box": entry(0.5, 0.01), "tin": entry(0.1, None)}},
+    ]  # fmt: skip
+    plan_only = summary_rows(results, 0.3)
+    assert [(r["run"], r["object"], r["success"]) for r in plan_only] == [
+        (0, "box", 1), (0, "tin", 1), (1, "box", 0), (1, "tin", 1),
+    ]  # fmt: skip
+    spec = BatchSpec("", "x.toml", ".", ".", height_tolerance=0.1)
+    summary = summarize(spec, results)
+    assert summary["runs"] == 2 and summary["target"] == ["box", "tin"]
+    assert summary["objects"]["box"]["success_rate"] == 0.5  # run 1: 0.5 m off in the plan
+    assert summary["objects"]["tin"]["success_rate"] == 0.0  # 0.3 m off in height; unknown
+    assert summary["success_rate"] == 0.25
+    assert summary["objects"]["tin"]["height_error_m"]["unknown"] == 1
+    assert summary["height_error_m"]["max"] == 0.3
+    with pytest.raises(InputError, match="--height-tolerance"):
+        BatchSpec("", "x.toml", ".", ".", height_tolerance=0.0)

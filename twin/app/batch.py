@@ -72,6 +72,7 @@ class BatchSpec:
     threshold: tuple[float, float] = DEFAULT_THRESHOLD
     tolerance: float = SUCCESS_RADIUS_M
     mission: str = "survey"  # or "search": views chosen as it goes (the config's [search])
+    height_tolerance: float | None = None  # metres; None: success is judged in the plan only
 
     def __post_init__(self) -> None:
         if self.mission not in ("survey", "search"):
@@ -92,6 +93,11 @@ class BatchSpec:
         if not self.tolerance > 0.0:
             raise InputError(
                 f"--tolerance must be a positive distance in metres, got {self.tolerance}"
+            )
+        if self.height_tolerance is not None and not self.height_tolerance > 0.0:
+            raise InputError(
+                "--height-tolerance must be a positive distance in metres, got "
+                f"{self.height_tolerance}"
             )
 
     @classmethod

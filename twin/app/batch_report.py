@@ -1,7 +1,8 @@
 """A batch's report: one row per run (``summary.csv``), the summary (``summary.json``), plots.
 
-Success is an estimate within the batch's tolerance of the truth; the plots show the error
-distribution and the success rate against every varied factor.
+Each object with ground truth is scored in each run: success is its estimate within the batch's
+tolerance of the truth in the plan and, when a height tolerance is given, in height. The plots
+show the plan error's distribution and the success rate against every varied factor.
 """
 
 from __future__ import annotations
@@ -20,84 +21,128 @@ from twin.core.errors import TwinError
 from twin.core.store import write_text_atomic
 
 SUMMARY_COLUMNS = (
-    "run", "success", "error_m", "truth_x", "truth_y", "estimate_x", "estimate_y", "surface",
-    "lighting", "threshold", "peak", "peak_ratio", "views", "setup_s", "move_s", "capture_s",
-    "detect_s", "fuse_s", "mission_s", "reused_world", "time_s", "path_length_m", "stopped",
+    "run", "object", "success", "error_m", "height_error_m", "truth_x", "truth_y", "truth_z",
+    "estimate_x", "estimate_y", "estimate_z", "surface", "lighting", "threshold", "peak",
+    "peak_ratio", "views", "setup_s", "move_s", "capture_s", "detect_s", "fuse_s", "mission_s",
+    "reused_world", "time_s", "path_length_m", "stopped",
 )  # fmt: skip
 
 
-def target_name(results: Sequence[dict[str, Any]]) -> str:
-    """The object scored in the summary: the first with ground truth."""
-    for name, entry in results[0]["objects"].items():
-        if "error_m" in entry:
-            return name
-    raise TwinError("no object of the batch has ground truth; give each object a scene body")
+def scored_objects(results: Sequence[dict[str, Any]]) -> list[str]:
+    """The objects the summary scores: every one with ground truth (a scene body)."""
+    names = [name for name, entry in results[0]["objects"].items() if "error_m" in entry]
+    if not names:
+        raise TwinError("no object of the batch has ground truth; give each object a scene body")
+    return names
 
 
-def summary_rows(results: Sequence[dict[str, Any]], tolerance: float) -> list[dict[str, Any]]:
-    name = target_name(results)
+def _succeeded(entry: dict[str, Any], tolerance: float, height_tolerance: float | None) -> bool:
+    """Within the plan's tolerance, and (when one is asked) the height's: an object whose
+    height is unknown misses a height tolerance."""
+    if entry["error_m"] > tolerance:
+        return False
+    if height_tolerance is None:
+        return True
+    height_error = entry.get("height_error_m")
+    return height_error is not None and height_error <= height_tolerance
+
+
+def summary_rows(
+    results: Sequence[dict[str, Any]], tolerance: float, height_tolerance: float | None = None
+) -> list[dict[str, Any]]:
+    """One row per run and scored object (the run's own columns repeated on each)."""
     rows = []
     for r in results:
-        entry, t = r["objects"][name], r["timings_s"]
-        rows.append({
-            "run": r["run"],
-            # a mission the robot could not finish failed, wherever its estimate was
-            "success": int(entry["error_m"] <= tolerance and "failed" not in r),
-            "error_m": entry["error_m"],
-            "truth_x": entry["truth_m"][0], "truth_y": entry["truth_m"][1],
-            "estimate_x": entry["estimate_m"][0], "estimate_y": entry["estimate_m"][1],
-            "surface": entry.get("surface", ""),
-            "lighting": round(r["lighting"], 4), "threshold": round(r["threshold"], 4),
-            "peak": entry["peak"], "peak_ratio": entry["peak_ratio"], "views": r["views"],
-            "setup_s": t["setup"], "move_s": t["move"], "capture_s": t["capture"],
-            "detect_s": t["detect"], "fuse_s": t["fuse"], "mission_s": t["mission"],
-            "reused_world": int(r["reused_world"]),
-            # robot time and metres driven (older journals have neither), why a search stopped
-            "time_s": r.get("time_s", ""), "path_length_m": r.get("path_length_m", ""),
-            "stopped": r.get("search", {}).get("stopped", ""),
-        })  # fmt: skip
+        t = r["timings_s"]
+        for name in scored_objects(results):
+            entry = r["objects"][name]
+            truth, estimate = list(entry["truth_m"]), list(entry["estimate_m"])
+            truth += [None] * (3 - len(truth))
+            estimate += [None] * (3 - len(estimate))
+            rows.append({
+                "run": r["run"], "object": name,
+                # a mission the robot could not finish failed, wherever its estimate was
+                "success": int(_succeeded(entry, tolerance, height_tolerance)
+                               and "failed" not in r),
+                "error_m": entry["error_m"], "height_error_m": entry.get("height_error_m"),
+                "truth_x": truth[0], "truth_y": truth[1], "truth_z": truth[2],
+                "estimate_x": estimate[0], "estimate_y": estimate[1], "estimate_z": estimate[2],
+                "surface": entry.get("surface", ""),
+                "lighting": round(r["lighting"], 4), "threshold": round(r["threshold"], 4),
+                "peak": entry["peak"], "peak_ratio": entry["peak_ratio"], "views": r["views"],
+                "setup_s": t["setup"], "move_s": t["move"], "capture_s": t["capture"],
+                "detect_s": t["detect"], "fuse_s": t["fuse"], "mission_s": t["mission"],
+                "reused_world": int(r["reused_world"]),
+                # robot time and metres driven (older journals have neither), why a search
+                # stopped
+                "time_s": r.get("time_s", ""), "path_length_m": r.get("path_length_m", ""),
+                "stopped": r.get("search", {}).get("stopped", ""),
+            })  # fmt: skip
     return rows
+
+
+def _errors(values: Sequence[float | None]) -> dict[str, float | int] | None:
+    known = np.array([v for v in values if v is not None], dtype=float)
+    if known.size == 0:
+        return None
+    return {
+        "mean": float(known.mean()),
+        "median": float(np.median(known)),
+        "p90": float(np.percentile(known, 90)),
+        "min": float(known.min()),
+        "max": float(known.max()),
+        "unknown": len(values) - int(known.size),
+    }
 
 
 def summarize(
     spec: BatchSpec, results: Sequence[dict[str, Any]], wall_s: float | None = None
 ) -> dict[str, Any]:
-    """Success rate within the tolerance, the error distribution and the timings."""
-    rows = summary_rows(results, spec.tolerance)
-    errors = np.array([r["error_m"] for r in rows])
+    """Success rate within the tolerances, per object and over all, the error distributions
+    (in the plan, and in height where known) and the timings."""
+    rows = summary_rows(results, spec.tolerance, spec.height_tolerance)
+    names = scored_objects(results)
+    runs = [r for r in rows if r["object"] == names[0]]  # one row per run, for its own columns
     hits = int(sum(r["success"] for r in rows))
     timing_keys = ("setup_s", "move_s", "capture_s", "detect_s", "fuse_s", "mission_s")
+    per_object = {}
+    for name in names:
+        mine = [r for r in rows if r["object"] == name]
+        done = int(sum(r["success"] for r in mine))
+        per_object[name] = {
+            "successes": done,
+            "success_rate": done / len(mine),
+            "error_m": _errors([r["error_m"] for r in mine]),
+            "height_error_m": _errors([r["height_error_m"] for r in mine]),
+        }
     summary: dict[str, Any] = {
-        "target": target_name(results),
-        "runs": len(rows),
+        "target": names[0] if len(names) == 1 else names,
+        "objects": per_object,
+        "runs": len(runs),
         "seed": spec.seed,
         "vary": list(spec.vary),
         "lighting_range": list(spec.lighting),
         "threshold_range": list(spec.threshold),
         "tolerance_m": spec.tolerance,
+        "height_tolerance_m": spec.height_tolerance,
         "successes": hits,
         "success_rate": hits / len(rows),
-        "error_m": {
-            "mean": float(errors.mean()),
-            "median": float(np.median(errors)),
-            "p90": float(np.percentile(errors, 90)),
-            "min": float(errors.min()),
-            "max": float(errors.max()),
-        },
+        "error_m": _errors([r["error_m"] for r in rows]),
+        "height_error_m": _errors([r["height_error_m"] for r in rows]),
         "timings_s": {
             k[:-2]: {
-                "mean": float(np.mean([r[k] for r in rows])),
-                "total": float(np.sum([r[k] for r in rows])),
+                "mean": float(np.mean([r[k] for r in runs])),
+                "total": float(np.sum([r[k] for r in runs])),
             }
             for k in timing_keys
         },
-        "worlds_reused": int(sum(r["reused_world"] for r in rows)),
+        "worlds_reused": int(sum(r["reused_world"] for r in runs)),
         "mission": spec.mission,
-        "views": _spread([r["views"] for r in rows]),
+        "views": _spread([r["views"] for r in runs]),
     }
     for key in ("time_s", "path_length_m"):
-        if all(r[key] != "" for r in rows):
-            summary[key] = _spread([r[key] for r in rows])
+        if all(r[key] != "" for r in runs):
+            summary[key] = _spread([r[key] for r in runs])
     if wall_s is not None:
         summary["wall_s"] = round(wall_s, 3)
     return summary
@@ -117,7 +162,7 @@ def write_summary(
     out: Path, spec: BatchSpec, results: Sequence[dict[str, Any]], wall_s: float | None = None
 ) -> tuple[dict[str, Any], list[Path]]:
     """``summary.csv`` (one row per run), ``summary.json`` and the plots; returns the summary."""
-    rows = summary_rows(results, spec.tolerance)
+    rows = summary_rows(results, spec.tolerance, spec.height_tolerance)
     buffer = io.StringIO()
     writer = csv.DictWriter(buffer, fieldnames=SUMMARY_COLUMNS, lineterminator="\n")
     writer.writeheader()
@@ -142,7 +187,8 @@ def _error_histogram(path: Path, rows: list[dict[str, Any]], tolerance: float) -
     ax.axvline(tolerance, color="#cc3311", linestyle="--", label=f"success radius {tolerance} m")
     ax.set_xlabel("estimate error (m)")
     ax.set_ylabel("runs")
-    ax.set_title(f"{len(rows)} runs: {100 * np.mean([r['success'] for r in rows]):.0f} % success")
+    what = "runs" if len({r["object"] for r in rows}) == 1 else "objects found in runs"
+    ax.set_title(f"{len(rows)} {what}: {100 * np.mean([r['success'] for r in rows]):.0f} % success")
     ax.legend()
     return save_figure(fig, path)
 

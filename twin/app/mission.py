@@ -221,9 +221,11 @@ class Checkpoint:
     def save(
         self, grid: AccumulatorGrid, state: MissionState, views: ViewLog | None = None
     ) -> None:
+        # Uncompressed: rewritten after every view, where compressing cost most of a view's
+        # time on large floors (benchmarks/bench_scale.py); the run's final files are compressed.
         if views is not None:
-            views.save(self.views_path)
-        grid.save(self.grid_path)
+            views.save(self.views_path, compress=False)
+        grid.save(self.grid_path, compress=False)
         write_text_atomic(self.state_path, state.to_json())
 
 

@@ -98,8 +98,9 @@ class ViewLog:
 
     # -- files ---------------------------------------------------------------------------
 
-    def save(self, path: str | os.PathLike[str]) -> Path:
-        """Write the log atomically (``.npz`` with a JSON header)."""
+    def save(self, path: str | os.PathLike[str], compress: bool = True) -> Path:
+        """Write the log atomically (``.npz`` with a JSON header; ``compress=False``: faster,
+        larger)."""
         n = len(self.views)
         columns = self.views[0].wedges.shape[0] if n else 0
         bins = max((v.visibility.profiles.shape[1] for v in self.views if v.visibility), default=0)
@@ -134,7 +135,7 @@ class ViewLog:
             ).reshape(n, len(self.objects), columns),
             "camera_heights": np.array([v.camera_height for v in self.views], dtype=float),
         }
-        return save_arrays(path, VIEW_LOG_FORMAT, VIEW_LOG_VERSION, header, arrays)
+        return save_arrays(path, VIEW_LOG_FORMAT, VIEW_LOG_VERSION, header, arrays, compress)
 
     @classmethod
     def load(cls, path: str | os.PathLike[str]) -> ViewLog:

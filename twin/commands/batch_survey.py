@@ -43,8 +43,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="range of the detector threshold: patch scores below it read 0 (default 0,0.25)",
     )  # fmt: skip
     parser.add_argument(
-        "--tolerance", type=float, default=0.3, help="success radius in metres (0.3)"
+        "--tolerance", type=float, default=0.3, help="success radius in the plan, metres (0.3)"
     )
+    parser.add_argument(
+        "--height-tolerance", type=float, default=None,
+        help="success also needs the height within this many metres (default: the plan only)",
+    )  # fmt: skip
     parser.add_argument(
         "--mission", choices=("survey", "search"), default="survey",
         help="survey: the config's fixed plan (default); search: views chosen as it goes "
@@ -82,7 +86,7 @@ def run(args: argparse.Namespace) -> int:
     spec = BatchSpec.from_config(
         args.config, overrides, seed=args.seed, vary=tuple(dict.fromkeys(args.vary)),
         lighting=args.lighting, threshold=args.threshold, tolerance=args.tolerance,
-        mission=args.mission,
+        mission=args.mission, height_tolerance=args.height_tolerance,
     )  # fmt: skip
     check_output_folder(
         args.out, "--out", lambda p: (p / JOURNAL_NAME).is_file(), "a twin batch-survey"
@@ -113,12 +117,19 @@ def run(args: argparse.Namespace) -> int:
     finally:
         executor.close()
     summary, paths = write_summary(args.out, spec, results, time.perf_counter() - started)
-    error = summary["error_m"]
-    say(
-        f"{summary['target']}: {summary['successes']}/{summary['runs']} runs within "
-        f"{spec.tolerance} m ({100 * summary['success_rate']:.0f} %); error median "
-        f"{error['median']:.2f} m, p90 {error['p90']:.2f} m, max {error['max']:.2f} m; "
-        f"{summary['timings_s']['mission']['mean']:.1f} s per mission"
+    within = f"{spec.tolerance} m" + (
+        f" and {spec.height_tolerance} m in height" if spec.height_tolerance is not None else ""
     )
+    say(f"{summary['runs']} runs, {summary['timings_s']['mission']['mean']:.1f} s per mission")
+    for name, scored in summary["objects"].items():
+        error, height = scored["error_m"], scored["height_error_m"]
+        line = (
+            f"{name}: {scored['successes']}/{summary['runs']} within {within} "
+            f"({100 * scored['success_rate']:.0f} %); plan error median {error['median']:.2f} m, "
+            f"p90 {error['p90']:.2f} m, max {error['max']:.2f} m"
+        )
+        if height is not None:
+            line += f"; height error median {height['median']:.2f} m, p90 {height['p90']:.2f} m"
+        say(line)
     say("wrote " + ", ".join(str(p) for p in paths))
     return 0

@@ -472,8 +472,9 @@ class AccumulatorGrid:
 
     # -- files ---------------------------------------------------------------------------
 
-    def save(self, path: str | os.PathLike[str]) -> Path:
-        """Write the grid atomically as ``.npz`` with a JSON header.
+    def save(self, path: str | os.PathLike[str], compress: bool = True) -> Path:
+        """Write the grid atomically as ``.npz`` with a JSON header (``compress=False``: faster,
+        larger; ``twin.core.store.save_arrays``).
 
         A grid of one direction bin is written in format version 1 (the arrays older versions
         of twin read); one of B > 1 bins in version 2, which adds ``direction_bins`` to the
@@ -498,7 +499,7 @@ class AccumulatorGrid:
                 "views": self._views,
                 **extra,
             }
-            return save_arrays(path, GRID_FORMAT, 1, header, arrays)
+            return save_arrays(path, GRID_FORMAT, 1, header, arrays, compress)
         header["direction_bins"] = self.direction_bins
         arrays = {
             "evidence": self._evidence,
@@ -507,7 +508,7 @@ class AccumulatorGrid:
             "views": self._views,
             **extra,
         }
-        return save_arrays(path, GRID_FORMAT, GRID_FORMAT_VERSION, header, arrays)
+        return save_arrays(path, GRID_FORMAT, GRID_FORMAT_VERSION, header, arrays, compress)
 
     @classmethod
     def load(cls, path: str | os.PathLike[str]) -> AccumulatorGrid:

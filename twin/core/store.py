@@ -63,14 +63,19 @@ def save_arrays(
     version: int,
     header: Mapping[str, Any],
     arrays: Mapping[str, np.ndarray],
+    compress: bool = True,
 ) -> Path:
-    """Save ``arrays`` and a JSON ``header`` tagged with a format ``kind`` and ``version``."""
+    """Save ``arrays`` and a JSON ``header`` tagged with a format ``kind`` and ``version``.
+
+    ``compress=False`` writes them as they are: several times faster, for files rewritten
+    often (a mission's checkpoint after every view), at several times the size."""
     if _HEADER_KEY in arrays:
         raise ValueError(f"array name {_HEADER_KEY!r} is reserved for the header")
     full_header = {"format": kind, "version": version, **header}
     header_bytes = np.frombuffer(json.dumps(full_header).encode("utf-8"), dtype=np.uint8)
     payload = {_HEADER_KEY: header_bytes, **{k: np.asarray(v) for k, v in arrays.items()}}
-    return write_atomic(path, lambda handle: np.savez_compressed(handle, **payload))
+    save = np.savez_compressed if compress else np.savez
+    return write_atomic(path, lambda handle: save(handle, **payload))
 
 
 def load_arrays(
