@@ -262,15 +262,12 @@ class CameraEffects:
         return out, depth
 
     def blur_length(self, rates: tuple[float, float]) -> tuple[float, float]:
-        """Blur streak (pixels, horizontal and vertical) of a camera turning at ``rates`` rad/s
-        during the exposure: rate x exposure time x focal length."""
+        """Blur streak (pixels, horizontal and vertical, signed as the rates) of a camera turning
+        at ``rates`` rad/s during the exposure: rate x exposure time x focal length."""
         lens = self.settings.lens
         fx = lens.fx if lens is not None else self.width / 2.0 / math.tan(math.radians(22.5))
         fy = lens.fy if lens is not None else fx
-        return (
-            abs(rates[0]) * self.settings.exposure_s * fx,
-            abs(rates[1]) * self.settings.exposure_s * fy,
-        )
+        return (rates[0] * self.settings.exposure_s * fx, rates[1] * self.settings.exposure_s * fy)
 
     def motion_blur(self, image: np.ndarray, rates: tuple[float, float]) -> np.ndarray:
         """Average of the image along the streak a turning camera sweeps (no blur below 0.5 px)."""
@@ -278,16 +275,17 @@ class CameraEffects:
         length = math.hypot(lx, ly)
         if length < 0.5:
             return image
-        size = 2 * math.ceil(length / 2.0) + 1
-        kernel = np.zeros((size, size), np.float32)
-        centre = (size - 1) / 2.0
-        for t in np.linspace(-0.5, 0.5, 4 * size + 1):  # splat the streak's points bilinearly
-            x, y = centre + t * lx, centre + t * ly
+        # the streak's bounding box only: a pan's streak is one row, cheap to filter
+        width, height = 2 * math.ceil(abs(lx) / 2.0) + 1, 2 * math.ceil(abs(ly) / 2.0) + 1
+        kernel = np.zeros((height, width), np.float32)
+        cx, cy = (width - 1) / 2.0, (height - 1) / 2.0
+        for t in np.linspace(-0.5, 0.5, 4 * max(width, height) + 1):  # splat points bilinearly
+            x, y = cx + t * lx, cy + t * ly
             x0, y0 = math.floor(x), math.floor(y)
             fx, fy = x - x0, y - y0
             for dx, dy, w in ((0, 0, (1 - fx) * (1 - fy)), (1, 0, fx * (1 - fy)),
                               (0, 1, (1 - fx) * fy), (1, 1, fx * fy)):  # fmt: skip
-                if 0 <= x0 + dx < size and 0 <= y0 + dy < size:
+                if w > 0.0 and 0 <= x0 + dx < width and 0 <= y0 + dy < height:
                     kernel[y0 + dy, x0 + dx] += w
         kernel /= kernel.sum()
         return cv2.filter2D(image, -1, kernel, borderType=cv2.BORDER_REPLICATE)
