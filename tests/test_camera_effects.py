@@ -13,6 +13,7 @@ import pytest
 
 # isort: off
 import twin.sim  # noqa: F401  (must come first: it selects headless GL before mujoco loads)
+import mujoco
 
 # isort: on
 from twin.app.config import load_config
@@ -259,3 +260,38 @@ def test_a_rendered_straight_edge_bends_as_the_lens_says() -> None:
     assert straightness(top_bent) > 0.6  # about 0.9 px of barrel bow here
     x, y = LENS.pixel_to_normalized(top_bent[:, 0], top_bent[:, 1])
     assert straightness(np.stack([x, y], axis=1) * LENS.fx) < 0.15
+
+
+@pytest.mark.parametrize(("lensed", "tilt_deg"), [(False, 20.0), (True, -15.0), (True, 25.0)])
+def test_pixel_rays_point_at_rendered_corners_with_the_head_tilted(lensed, tilt_deg) -> None:
+    """Rays through rendered geometry: the chessboard's inner corners are known points in the
+    world; the rays ``pixel_rays`` gives for the pixels where they were found point at them
+    (from the optical centre, with the head panned and tilted), to 0.04 degrees."""
+    from twin.app.calibrate import _board_mover, _rotation
+
+    robot = SimRobot(World("scenes/calibration_board.xml"), Pose2D(0.0, 0.0, 0.3))
+    pan, tilt = math.radians(10.0), math.radians(tilt_deg)
+    pan, tilt = robot.move_head(pan, tilt)  # where the servos settled (to 0.2 deg)
+    _board_mover(robot)(np.array([0.1, -0.05, -1.3]), _rotation(0.3, -0.2, 0.1))
+    model = CameraModel.with_lens(320, 240, LENS) if lensed else CameraModel()
+    effects = CameraEffects(only(lens=LENS), 320, 240) if lensed else None
+    corners = corner_rows(grab(robot, model, effects)[0].image)
+    assert corners is not None
+    pixels = corners.reshape(-1, 2) + 0.5  # OpenCV's pixel centres -> edge coordinates
+    bearing, elevation = model.pixel_rays(pixels[:, 0], pixels[:, 1], tilt)
+    # the truth: each inner corner's world point seen from the optical centre
+    data, board = robot.world.data, robot.world.model.body("calibration_board").id
+    mocap = robot.world.model.body_mocapid[board]
+    rotation = np.zeros(9)
+    mujoco.mju_quat2Mat(rotation, data.mocap_quat[mocap])
+    i, j = np.meshgrid(np.arange(9) - 4.0, np.arange(6) - 2.5)
+    local = np.stack([i.ravel() * 0.06, j.ravel() * 0.06, np.full(54, 0.005)], axis=1)
+    points = data.mocap_pos[mocap] + local @ rotation.reshape(3, 3).T
+    ray = points - robot.camera_position()
+    heading = robot.truth_pose().yaw + robot.head()[0]
+    true_bearing = np.arctan2(ray[:, 1], ray[:, 0]) - heading
+    true_elevation = np.arctan2(ray[:, 2], np.hypot(ray[:, 0], ray[:, 1]))
+    seen = np.stack([bearing, elevation], axis=1)[:, None, :]
+    truth = np.stack([true_bearing, true_elevation], axis=1)[None, :, :]
+    nearest = np.degrees(np.linalg.norm(seen - truth, axis=2).min(axis=1))
+    assert nearest.max() < 0.04  # 0.26 px at the lens's focal length

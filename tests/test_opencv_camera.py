@@ -95,3 +95,28 @@ def test_a_grab_longer_than_four_read_timeouts_is_a_timeout(monkeypatch):
         monkeypatch.setattr(StuckCapture, "seconds", 1.5)  # 4.5 s, over 4 x 1 s: it hangs
         with pytest.raises(DeviceTimeoutError, match=r"grab a frame: took 4\.5 s"):
             camera.grab()
+
+
+def test_a_calibrated_lens_from_the_config_is_the_cameras_model(tmp_path):
+    """`twin calibrate` writes intrinsics and distortion into [robot.camera]; the camera built
+    from that table carries them, so wedges go through the real lens, not the nominal 45 deg."""
+    from twin.app.config import ConfigError, DeviceConfig
+    from twin.app.device_types import OpenCVCameraOptions
+    from twin.app.factory import opencv_camera as build
+    from twin.core.geometry import CameraModel
+
+    video = write_video(tmp_path / "red.avi")
+    options = OpenCVCameraOptions(
+        device=str(video),
+        intrinsics=(377.0, 377.2, 161.9, 118.4),
+        distortion=(-0.2, 0.03, 5e-4, -3e-4, 0.0),
+    )
+    camera = build(DeviceConfig("camera", "opencv", options), None)
+    assert camera.model.lens is not None and camera.model.lens.k1 == -0.2
+    assert camera.model.hfov == pytest.approx(np.radians(47.5), abs=np.radians(0.1))
+    assert camera.model != CameraModel()
+    nominal = build(DeviceConfig("camera", "opencv", OpenCVCameraOptions(str(video))), None)
+    assert nominal.model == CameraModel()  # no calibration: the nominal pinhole as before
+    half = OpenCVCameraOptions(device=str(video), intrinsics=(377.0, 377.2, 161.9, 118.4))
+    with pytest.raises(ConfigError, match=f"opencv camera {video}: .*twin calibrate"):
+        build(DeviceConfig("camera", "opencv", half), None)
