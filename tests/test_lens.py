@@ -181,3 +181,15 @@ def test_the_vcc4_lens_has_its_datasheet_field_and_barrel_distortion() -> None:
 def test_a_camera_whose_hfov_disagrees_with_its_lens_is_refused() -> None:
     with pytest.raises(InputError, match="with_lens"):
         CameraModel(320, 240, math.radians(45.0), VCC4)
+
+
+@pytest.mark.parametrize("lensed", [False, True])
+def test_ray_pixels_inverts_pixel_rays(lensed: bool) -> None:
+    camera = CameraModel.with_lens(320, 240, VCC4) if lensed else CameraModel()
+    u, v = frame_pixels()
+    for tilt in (-0.3, 0.0, 0.5):
+        back_u, back_v = camera.ray_pixels(*camera.pixel_rays(u, v, tilt), tilt)
+        np.testing.assert_allclose(back_u, u, atol=1e-8)
+        np.testing.assert_allclose(back_v, v, atol=1e-8)
+    behind_u, _ = camera.ray_pixels(np.array([math.pi]), np.array([0.0]), 0.0)
+    assert np.isnan(behind_u).all()

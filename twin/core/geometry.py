@@ -174,6 +174,29 @@ class CameraModel:
         elevation = np.arctan2(up, np.hypot(forward, x))
         return bearing, elevation
 
+    def ray_pixels(
+        self, bearing: np.ndarray, elevation: np.ndarray, tilt: float = 0.0
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Where rays land in the image: the inverse of ``pixel_rays``. ``bearing`` (relative to
+        the pan heading, positive left) and ``elevation`` (above the horizontal) in radians, the
+        head tilted up by ``tilt``; returns pixel positions (u, v) from the image's left and top
+        edges, through the lens if any, NaN for rays behind the camera. What a visibility model
+        needs to look a point up in a depth image the lens has bent."""
+        require_finite("tilt", tilt)
+        b = np.asarray(bearing, dtype=float)
+        e = np.asarray(elevation, dtype=float)
+        ahead, left, up = np.cos(e) * np.cos(b), np.cos(e) * np.sin(b), np.sin(e)
+        c, s = math.cos(tilt), math.sin(tilt)
+        depth = ahead * c + up * s
+        with np.errstate(divide="ignore", invalid="ignore"):
+            x = np.where(depth > 0.0, -left / depth, np.nan)
+            y = np.where(depth > 0.0, (ahead * s - up * c) / depth, np.nan)
+        if self.lens is None:
+            f = self.focal_px
+            return self.width / 2.0 + f * x, self.height / 2.0 + f * y
+        u, v = self.lens.normalized_to_pixel(x, y)
+        return u + 0.5, v + 0.5
+
     def wedges(
         self,
         pose: Pose2D,
