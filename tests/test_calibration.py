@@ -337,3 +337,54 @@ def test_the_grid_fuses_the_ranged_rule_cell_by_cell() -> None:
     blind.fuse_all((0.0, 1.0), wedge, {"box": np.array([0.9])}, 2.0)
     assert observed[far] == pytest.approx(blind.observed("box")[far]) and observed[far] > 0
     assert layer[far] == pytest.approx(math.log(0.5 * math.e + 0.5) * observed[far])
+
+
+def test_calibration_frames_pass_through_camera_effects_with_their_masks():
+    """A camera that mirrors the frame: the images, depths and masks all come out mirrored,
+    poses are the same as without it, and its rng is its own."""
+    from twin.sim.training import calibration_views
+
+    seen_rngs = []
+
+    def mirror(image, depth, rng):
+        seen_rngs.append(rng)
+        rng.normal()  # a camera's noise must not move the next pose
+        return np.ascontiguousarray(image[:, ::-1]), np.ascontiguousarray(depth[:, ::-1])
+
+    recipe = {"n_placements": 1, "views_per_placement": 2, "aimed_fraction": 1.0, "seed": 1234}
+    clean = calibration_views(**recipe)
+    through = calibration_views(**recipe, effects=mirror)
+    assert len(seen_rngs) == 2
+    np.testing.assert_array_equal(through.poses, clean.poses)
+    np.testing.assert_array_equal(through.images, clean.images[:, :, ::-1])
+    np.testing.assert_array_equal(through.masks, clean.masks[:, :, ::-1])
+    assert through.masks.any()
+    np.testing.assert_array_equal(through.depths, clean.depths[:, :, ::-1])
+
+    def shrink(image, depth, rng):
+        return image[:100], depth[:100]
+
+    with pytest.raises(InputError, match="camera effects returned"):
+        calibration_views(**recipe, effects=shrink)
+    with pytest.raises(InputError, match="effects must be callable"):
+        calibration_views(**recipe, effects=42)
+
+
+def test_prepare_detector_calibrates_through_effects_under_their_own_key(tmp_path, counted_views):
+    from twin.app.detection import calibration_key
+
+    objects = [ObjectConfig("blue", None, "blue_box")]
+    params = {"n_clusters": 8}
+
+    def camera(image, depth, rng):
+        return image, depth
+
+    prepare_detector(objects, params, tmp_path, say=lambda _: None, calibration_scene="living_room")
+    prepare_detector(
+        objects, params, tmp_path, say=lambda _: None, calibration_scene="living_room",
+        calibration_effects=camera,
+    )  # fmt: skip
+    assert [c[2].get("effects") for c in counted_views["calibration"]] == [None, camera]
+    # Clean frames keep the key they had before effects existed; a camera changes it.
+    assert calibration_key("m", "x") == calibration_key("m", "x", None)
+    assert calibration_key("m", "x", camera) != calibration_key("m", "x")

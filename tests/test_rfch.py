@@ -369,7 +369,87 @@ def test_objects_on_a_shared_codebook_are_scored_together_and_alone_alike(model:
 
 def test_a_reused_codebook_takes_only_views(model: RFCH) -> None:
     frame, mask = scene(0)
-    with pytest.raises(InputError, match="only 'views'"):
+    with pytest.raises(InputError, match="only views, view_similarity"):
         RFCH.train("x", [frame], [mask], codebook=model, n_clusters=4)
     with pytest.raises(InputError, match="at least one object"):
         RFCH.train_shared({})
+
+
+# ------------------------------------------------------------------ the public shared path
+
+
+def two_objects() -> dict[str, tuple[list[np.ndarray], list[np.ndarray]]]:
+    """Two objects that look nothing alike: the striped disc, and a flat two-tone square."""
+    rng = np.random.default_rng(5)
+    rings, rings_mask = striped_object(40)
+    square = np.zeros((40, 40, 3), np.uint8)
+    square[:, :20] = (20, 180, 60)
+    square[:, 20:] = (240, 230, 40)
+    square_mask = np.ones((40, 40), bool)
+    out: dict[str, tuple[list[np.ndarray], list[np.ndarray]]] = {}
+    shapes = {"rings": (rings, rings_mask), "square": (square, square_mask)}
+    for name, (obj, mask) in shapes.items():
+        views = [
+            paste(cloudy_background(rng, 96, 128), obj, mask, (64, 48), angle_deg=a)
+            for a in (0.0, 30.0, 60.0)
+        ]
+        out[name] = ([v[0] for v in views], [v[1] for v in views])
+    return out
+
+
+def test_detector_train_puts_every_object_on_one_codebook_that_survives_files(tmp_path) -> None:
+    objects = two_objects()
+    detector = Detector.train(objects, **SMALL)
+    assert detector.names == ["rings", "square"] and detector.n_codebooks == 1
+    frame, _ = scene(3)
+    layers = detector.scores(frame)
+    for index, model in enumerate(detector.models):
+        np.testing.assert_array_equal(model.scores(frame), layers[index])  # alone = together
+        model.save(tmp_path / f"{model.name}.npz")
+    loaded = Detector([RFCH.load(tmp_path / f"{name}.npz") for name in reversed(detector.names)])
+    assert loaded.n_codebooks == 1
+    np.testing.assert_array_equal(loaded.scores(frame), layers[::-1])
+
+
+def test_an_object_added_to_a_detector_shares_its_codebook_and_changes_no_score() -> None:
+    objects = two_objects()
+    rings = Detector.train({"rings": objects["rings"]}, **SMALL)
+    frame, _ = scene(4)
+    before = rings.scores(frame)
+    both = rings.add("square", *objects["square"])
+    assert both.names == ["rings", "square"] and both.n_codebooks == 1
+    np.testing.assert_array_equal(both.scores(frame)[:1], before)
+    with pytest.raises(InputError, match="already has an object named 'rings'"):
+        both.add("rings", *objects["rings"])
+
+
+@pytest.mark.parametrize(
+    ("objects", "message"),
+    [
+        ({}, "at least one object"),
+        ({"a": ([np.zeros((8, 8, 3), np.uint8)], [])}, "1 training images but 0 masks"),
+    ],
+)
+def test_bad_input_to_detector_train_is_one_line(objects, message) -> None:
+    with pytest.raises(InputError, match=message) as error:
+        Detector.train(objects)
+    assert "\n" not in str(error.value)
+
+
+def test_clustered_views_find_two_objects_shown_as_one() -> None:
+    """Two objects' views given as one object's: the rule finds the two, and no more."""
+    objects = two_objects()
+    images = objects["rings"][0] + objects["square"][0]
+    masks = objects["rings"][1] + objects["square"][1]
+    model = RFCH.train("both", images, masks, views="clustered", **SMALL)
+    assert len(model.histograms) == 2
+    assert model.summary["view_models"] == [0, 0, 0, 1, 1, 1]
+    # The cap wins over the similarity rule: one model when only one is allowed.
+    capped = RFCH.train("both", images, masks, views="clustered", max_view_models=1, **SMALL)
+    assert len(capped.histograms) == 1
+    # A patch on either object scores its own model: as well as a merged model would, or better.
+    merged = RFCH.train("both", images, masks, **SMALL)
+    for frame in (images[0], images[4]):
+        assert model.scores(frame).max() >= merged.scores(frame).max() - 1e-6
+    with pytest.raises(InputError, match="view_similarity must be in"):
+        RFCH.train("both", images, masks, views="clustered", view_similarity=1.5)

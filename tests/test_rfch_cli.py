@@ -154,7 +154,7 @@ def test_train_shared_and_reuse_a_codebook(data: Path, tmp_path: Path, capsys) -
     assert main([*args, "--codebook", str(out / "rings.npz"), "--out", str(late)]) == 0
     assert RFCH.load(late).codebook_key == rings.codebook_key
     assert main([*args, "--codebook", str(out / "rings.npz"), "--out", str(late), "--alpha", "2"])
-    assert "only 'views'" in capsys.readouterr().err
+    assert "only views, view_similarity, max_view_models" in capsys.readouterr().err
 
     bad = ["train-shared", "--object", "nameless", "--out-dir", str(out)]
     assert main(bad) == 2

@@ -30,6 +30,9 @@ from twin.core.errors import InputError
 from twin.resources import models_dir, scenes_dir
 
 TRAINING_SCENE = "training_stage"
+# How the training views are rendered (part of the model's cache key): camera drops (m above the
+# object's centre) for ``twin.sim.training.training_views``, i.e. the elevations it is seen from.
+TRAINING_RECIPE: dict[str, Any] = {"camera_drops": (0.4,)}
 # How the calibration is measured: part of its cache key. 12 placements x 16 views give about
 # 3500 columns of which about 130 lie on the rice box (measured in living_room).
 CALIBRATION_RECIPE: dict[str, Any] = {
@@ -62,6 +65,7 @@ def cache_key(obj: ObjectConfig, params: dict[str, Any], group: Sequence[str] = 
         "version": __version__,
         "group": sorted(group),
         "assets": _tree_digest([models_dir(), scenes_dir()]),
+        "training": TRAINING_RECIPE,
     }
     return hashlib.sha256(json.dumps(recipe, sort_keys=True).encode()).hexdigest()[:16]
 
@@ -72,14 +76,19 @@ def prepare_detector(
     cache: Path,
     say: Callable[[str], None] = print,
     calibration_scene: str | None = None,
+    calibration_effects: Any = None,
 ):
     """A ``twin.rfch.Detector`` over ``objects``: models from files, and the scene's objects
-    trained together on one shared codebook (so each extra object costs about 1 % of the
-    first, not 55-90 %: docs/rfch.md), cached as a group.
+    trained together on one shared codebook (``Detector.train``: each extra object costs a few
+    % of the first, not 55-90 %: docs/rfch.md), cached as a group.
 
     ``calibration_scene`` (a scene name, e.g. the survey's): the scene-trained models get a
     score calibration measured there (``model.calibration``; module docstring). None: no
     calibration is measured; model files keep whatever calibration they carry.
+    ``calibration_effects``: the calibration frames pass through this camera
+    (``effects(image, depth, rng) -> (image, depth)`` or a ``CameraEffects``; see
+    ``twin.sim.training.calibration_views``), so the calibration sees the frames the survey
+    sees; part of the calibration's cache key (``effects_tag``). None: clean frames.
     """
     from twin.rfch import RFCH, Detector, RFCHParams
 
@@ -96,7 +105,7 @@ def prepare_detector(
     # The calibrated model sits beside the plain one: a new calibration recipe re-measures the
     # calibration only, not the training.
     calibrated = {
-        name: cache / f"{path.stem}_cal{calibration_key(path.stem, calibration_scene)}.npz"
+        name: _calibrated_path(path, calibration_scene, calibration_effects)
         for name, path in paths.items()
         if calibration_scene is not None
     }
@@ -112,7 +121,9 @@ def prepare_detector(
                 model.save(paths[name])
         if calibration_scene is not None:
             for obj in from_scene:
-                model, room = _calibrate(trained[obj.name], obj, calibration_scene, say)
+                model, room = _calibrate(
+                    trained[obj.name], obj, calibration_scene, say, calibration_effects
+                )
                 # The room's log first: a calibrated model without one is calibrated again.
                 room.save(room_log_path(calibrated[obj.name]))
                 model.save(calibrated[obj.name])
@@ -127,10 +138,30 @@ def prepare_detector(
     return detector
 
 
-def calibration_key(model_key: str, scene: str | None) -> str:
+def effects_tag(effects: Any) -> str | None:
+    """What identifies a camera-effects chain in a cache key: its settings' repr (a
+    ``CameraEffects`` or the object of a bound ``apply``), else the callable's qualified name;
+    None for clean frames."""
+    if effects is None:
+        return None
+    owner = effects if hasattr(effects, "apply") else getattr(effects, "__self__", None)
+    settings = getattr(owner, "settings", None)
+    if settings is not None:
+        return f"{type(owner).__qualname__}:{settings!r}"
+    return f"{getattr(effects, '__module__', '')}.{getattr(effects, '__qualname__', repr(effects))}"
+
+
+def _calibrated_path(model_path: Path, scene: str | None, effects: Any = None) -> Path:
+    """Where the calibrated model of ``model_path`` is kept (beside it)."""
+    key = calibration_key(model_path.stem, scene, effects)
+    return model_path.with_name(f"{model_path.stem}_cal{key}.npz")
+
+
+def calibration_key(model_key: str, scene: str | None, effects: Any = None) -> str:
     """What a calibration depends on beyond its model, hashed: the scene, the recipe, the
-    calibration format and the reserved seed. (The scene's assets and the code version are in
-    ``model_key`` already.)"""
+    calibration format, the reserved seed and the camera effects if any (``effects_tag``; clean
+    frames leave the key as it was before effects existed). (The scene's assets and the code
+    version are in ``model_key`` already.)"""
     from twin.rfch.calibration import CALIBRATION_VERSION, DEFAULT_RANGES
     from twin.sim.training import CALIBRATION_SEED
 
@@ -142,6 +173,8 @@ def calibration_key(model_key: str, scene: str | None) -> str:
         "seed": CALIBRATION_SEED,
         "ranges": DEFAULT_RANGES,
     }
+    if effects is not None:
+        recipe["effects"] = effects_tag(effects)
     return hashlib.sha256(json.dumps(recipe, sort_keys=True).encode()).hexdigest()[:12]
 
 
@@ -152,28 +185,37 @@ def room_log_path(calibrated_model: Path) -> Path:
 
 
 def room_logs(
-    objects: Sequence[ObjectConfig], params: dict[str, Any], cache: Path, scene: str
+    objects: Sequence[ObjectConfig],
+    params: dict[str, Any],
+    cache: Path,
+    scene: str,
+    calibration_effects: Any = None,
 ) -> dict[str, Any]:
-    """The room logs ``prepare_detector(..., calibration_scene=scene)`` measured, per object
-    trained from the scene (model files have none)."""
+    """The room logs ``prepare_detector(..., calibration_scene=scene, calibration_effects=...)``
+    measured, per object trained from the scene (model files have none)."""
     from twin.app.view_log import ViewLog
 
     from_scene = [obj for obj in objects if obj.model is None]
     group = [obj.name for obj in from_scene]
     out = {}
     for obj in from_scene:
-        stem = f"rfch_{obj.name}_{cache_key(obj, params, group)}"
-        path = cache / f"{stem}_cal{calibration_key(stem, scene)}.npz"
+        model_path = cache / f"rfch_{obj.name}_{cache_key(obj, params, group)}.npz"
+        path = _calibrated_path(model_path, scene, calibration_effects)
         if room_log_path(path).is_file():
             out[obj.name] = ViewLog.load(room_log_path(path))
     return out
 
 
 def _calibrate(
-    model: Any, obj: ObjectConfig, scene: str, say: Callable[[str], None]
+    model: Any,
+    obj: ObjectConfig,
+    scene: str,
+    say: Callable[[str], None],
+    effects: Any = None,
 ) -> tuple[Any, Any]:
     """``model`` with its score calibration measured on ``scene`` (module docstring), and the
-    room's look without the object from the same frames (``twin.app.room``)."""
+    room's look without the object from the same frames (``twin.app.room``); the frames pass
+    through the camera ``effects`` if given (``calibration_views``)."""
     import math
     from dataclasses import replace
 
@@ -188,7 +230,9 @@ def _calibrate(
     recipe = dict(CALIBRATION_RECIPE)
     min_cover = recipe.pop("min_cover")
     say(f"calibrating the RFCH model of {obj.name!r} on {scene} views")
-    views = training.calibration_views(scene=scene, target=obj.body, **recipe)
+    if effects is not None and hasattr(effects, "reset"):
+        effects.reset()  # the camera's exposure and white balance start afresh, as in a survey
+    views = training.calibration_views(scene=scene, target=obj.body, effects=effects, **recipe)
     detector = Detector([model])
     scores = [detector.scores(image)[0].max(axis=0) for image in views.images]
     truth = [column_truth(mask, model.params.grid, min_cover) for mask in views.masks]
@@ -214,16 +258,17 @@ def _calibrate(
 def _train_from_scene(
     objects: Sequence[ObjectConfig], params: dict[str, Any], say: Callable[[str], None], cache: Path
 ) -> dict[str, Any]:
-    """Train ``objects`` from the training stage's views with exact masks: one object alone,
-    several on one shared codebook."""
-    from twin.rfch import RFCH
+    """Train ``objects`` from the training stage's views (``TRAINING_RECIPE``) with exact
+    masks, all on one shared codebook."""
+    from twin.rfch import Detector
     from twin.sim import training_views
 
     names = ", ".join(repr(obj.name) for obj in objects)
     say(f"training the RFCH model of {names} from the training stage (cached in {cache})")
-    views = {obj.name: training_views(target=obj.body, scene=TRAINING_SCENE) for obj in objects}
-    if len(views) == 1:
-        ((name, (images, masks)),) = views.items()
-        return {name: RFCH.train(name, list(images), list(masks), **params)}
-    shared = RFCH.train_shared({n: (list(i), list(m)) for n, (i, m) in views.items()}, **params)
-    return {model.name: model for model in shared}
+    drops = TRAINING_RECIPE["camera_drops"]
+    views = {
+        obj.name: training_views(target=obj.body, scene=TRAINING_SCENE, camera_drop=drops)
+        for obj in objects
+    }
+    detector = Detector.train({n: (list(i), list(m)) for n, (i, m) in views.items()}, **params)
+    return {model.name: model for model in detector.models}

@@ -133,7 +133,19 @@ def _add_parameters(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--views",
         choices=VIEW_MODES,
-        help=f"one histogram over all views, or one per view ({defaults.views})",
+        help="one histogram over all views, one per view, or similar views clustered into a "
+        f"few models ({defaults.views})",
+    )
+    parser.add_argument(
+        "--view-similarity",
+        type=float,
+        help="clustered: merge views that match each other on average at least this "
+        f"({defaults.view_similarity})",
+    )
+    parser.add_argument(
+        "--max-view-models",
+        type=int,
+        help=f"clustered: at most this many models per object ({defaults.max_view_models})",
     )
 
 
@@ -148,6 +160,8 @@ _PARAMETER_NAMES = {
     "stride": "stride",
     "seed": "seed",
     "views": "views",
+    "view_similarity": "view_similarity",
+    "max_view_models": "max_view_models",
 }
 
 

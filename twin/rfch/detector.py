@@ -76,7 +76,7 @@ class Detector:
         name: str,
         images: Sequence[np.ndarray],
         masks: Sequence[np.ndarray],
-        views: str | None = None,
+        **views: Any,
     ) -> Detector:
         """A new Detector with one more object, trained on this detector's (first) codebook.
 
@@ -84,12 +84,12 @@ class Detector:
         scores of the objects already here do not change, and the new object costs one
         intersection per patch. Its colours are only those the codebook already knows: an
         object unlike all the others is better trained with them (``Detector.train``).
-        ``views`` optionally overrides the view mode ("merged", "per_view", "clustered").
+        ``views`` may set the view parameters (``views``, ``view_similarity``,
+        ``max_view_models``); the rest are the codebook's.
         """
         if name in self.names:
             raise InputError(f"the detector already has an object named {name!r}; pick another")
-        extra = {} if views is None else {"views": views}
-        model = RFCH.train(name, images, masks, codebook=self.models[0], **extra)
+        model = RFCH.train(name, images, masks, codebook=self.models[0], **views)
         return Detector([*self.models, model], self.share_cells)
 
     @property

@@ -18,7 +18,11 @@ from twin.rfch import kernels
 from twin.rfch.calibration import ScoreCalibration
 from twin.rfch.descriptor import check_image, check_mask, raw_descriptors, sample
 from twin.rfch.params import RFCHParams
+from twin.rfch.views import cluster_views
 
+# The parameters that only decide how an object's views become histograms: free to differ
+# between objects sharing one codebook (their codebook_key leaves them out).
+VIEW_PARAMETERS = ("views", "view_similarity", "max_view_models")
 MODEL_KIND = "rfch-model"
 MODEL_VERSION = 1
 # Standard deviations below this (in descriptor units: chromaticity, or log/relative intensity
@@ -96,22 +100,22 @@ class RFCH:
 
         With ``codebook`` (another model), its codebook and parameters are reused and only this
         object's histogram is built, so a ``Detector`` labels and counts pairs once for both;
-        only ``views`` may then be given.
+        only the view parameters (``VIEW_PARAMETERS``) may then be given.
         """
         if codebook is None:
             return cls.train_shared({name: (images, masks)}, **params)[0]
-        if set(params) - {"views"}:
+        if set(params) - set(VIEW_PARAMETERS):
             raise InputError(
-                f"with a codebook only 'views' may be given, got {sorted(params)}; the other "
-                "parameters come from the codebook's model"
+                f"with a codebook only {', '.join(VIEW_PARAMETERS)} may be given, got "
+                f"{sorted(params)}; the other parameters come from the codebook's model"
             )
         config = replace(codebook.params, **params)
         views = _checked_views(name, images, masks, config)
-        histograms, pairs = _histograms(
+        histograms, per_view = _histograms(
             views, config, codebook.offset, codebook.scale, codebook.centres, codebook.radius
         )
         summary = {
-            **_view_summary(views, pairs),
+            **_view_summary(views, per_view),
             "codebook": dict(codebook.summary.get("codebook", {}), reused_from=codebook.name),
         }
         return cls(
@@ -173,8 +177,8 @@ class RFCH:
         }
         models = []
         for name, object_views in views.items():
-            histograms, pairs = _histograms(object_views, config, mean, scale, centres, radius)
-            summary = {**_view_summary(object_views, pairs), "codebook": codebook}
+            histograms, per_view = _histograms(object_views, config, mean, scale, centres, radius)
+            summary = {**_view_summary(object_views, per_view), "codebook": codebook}
             models.append(cls(name, config, mean, scale, centres, radius, histograms, summary))
         return models
 
@@ -233,7 +237,7 @@ class RFCH:
             digest = hashlib.sha1()
             for array in (self.offset, self.scale, self.centres, self.radius):
                 digest.update(np.ascontiguousarray(array).tobytes())
-            shared = {k: v for k, v in self.params.to_json().items() if k != "views"}
+            shared = {k: v for k, v in self.params.to_json().items() if k not in VIEW_PARAMETERS}
             digest.update(json.dumps(shared, sort_keys=True).encode())
             self._codebook_key = digest.hexdigest()
         return self._codebook_key
@@ -316,8 +320,9 @@ def _histograms(
     scale: np.ndarray,
     centres: np.ndarray,
     radius: np.ndarray,
-) -> tuple[np.ndarray, list[int]]:
-    """Normalized model histograms (merged: 1, per view: V) and the pair count of each view."""
+) -> tuple[np.ndarray, dict[str, list[int]]]:
+    """Normalized model histograms (merged: 1, per view: V, clustered: a few) and, per view,
+    its pair count and the index of the histogram (model) it went into."""
     widths = kernels.half_widths(config.d_max, config.sample_step)
     per_view = []
     for index, (desc, mask) in enumerate(views):
@@ -335,16 +340,25 @@ def _histograms(
     if config.views == "merged":
         merged = np.sum(per_view, axis=0)
         histograms = (merged / merged.sum())[None]
+    elif config.views == "clustered":
+        clusters, models = cluster_views(per_view, config.view_similarity, config.max_view_models)
+        histograms = np.stack([c / c.sum() for c in clusters])
     else:
         histograms = np.stack([c / c.sum() for c in per_view])
-    return histograms, [int(c.sum()) for c in per_view]
+    if config.views == "merged":
+        models = [0] * len(per_view)
+    elif config.views == "per_view":
+        models = list(range(len(per_view)))
+    return histograms, {"pairs_per_view": [int(c.sum()) for c in per_view], "view_models": models}
 
 
-def _view_summary(views: list[tuple[np.ndarray, np.ndarray]], pairs: list[int]) -> dict[str, Any]:
+def _view_summary(
+    views: list[tuple[np.ndarray, np.ndarray]], per_view: dict[str, list[int]]
+) -> dict[str, Any]:
     return {
         "views": len(views),
         "object_pixels": int(sum(int(mask.sum()) for _, mask in views)),
-        "pairs_per_view": pairs,
+        **per_view,
     }
 
 

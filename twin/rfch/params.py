@@ -27,7 +27,7 @@ import numpy as np
 from twin.core.errors import InputError
 
 RESPONSES = ("gradient", "laplacian")
-VIEW_MODES = ("merged", "per_view")
+VIEW_MODES = ("merged", "per_view", "clustered")
 
 
 @dataclass(frozen=True)
@@ -101,7 +101,11 @@ class RFCHParams:
       most ``d_max`` px apart are counted; ``sample_step`` labels every n-th pixel in each
       direction (pairs keep their true pixel distance) — see ``twin.rfch.kernels``.
     Grid: ``patch_size`` and ``stride`` in px. Views: ``views`` = "merged" (one histogram over
-      all training views) or "per_view" (one per view; a patch scores its best view).
+      all training views), "per_view" (one per view; a patch scores its best view) or
+      "clustered" (paper §4: similar views merged into a few models, a patch scores its best
+      model): agglomerative, the two clusters whose merged histograms intersect most are merged
+      while that intersection is at least ``view_similarity``, or while there are more than
+      ``max_view_models`` clusters (``twin.rfch.views``).
     """
 
     n_clusters: int = 80
@@ -120,6 +124,8 @@ class RFCHParams:
     patch_size: int = 32
     stride: int = 16
     views: str = "merged"
+    view_similarity: float = 0.6
+    max_view_models: int = 4
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "sigmas", tuple(float(s) for s in self.sigmas))
@@ -129,6 +135,13 @@ class RFCHParams:
         _require_int("kmeans_iterations", self.kmeans_iterations, 1)
         _require_int("sample_step", self.sample_step, 1)
         _require_int("seed", self.seed, 0)
+        _require_int("max_view_models", self.max_view_models, 1)
+        if not (
+            isinstance(self.view_similarity, int | float)
+            and not isinstance(self.view_similarity, bool)
+            and 0.0 <= self.view_similarity <= 1.0
+        ):
+            raise InputError(f"view_similarity must be in [0, 1], got {self.view_similarity!r}")
         _require_positive("alpha", self.alpha)
         _require_positive("d_max", self.d_max)
         _require_positive("colour_weight", self.colour_weight)
