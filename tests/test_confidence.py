@@ -133,3 +133,18 @@ def test_reliability_table_bins_confidences():
     assert rows[0].mean_confidence == pytest.approx(0.125) and rows[0].hit_rate == 0.5
     assert math.isnan(rows[1].mean_confidence) and math.isnan(rows[1].hit_rate)
     assert rows[3].hit_rate == 1.0
+
+
+def test_the_mass_within_a_radius_is_the_same_from_the_spec_or_from_every_centre():
+    """The spec's shortcut (only the cells around the estimate) against every cell's centre,
+    near edges and corners too."""
+    spec = GridSpec(0.0, 0.0, 3.0, 2.0, 0.1)
+    rng = np.random.default_rng(3)
+    probs = rng.random(spec.shape)
+    probs /= probs.sum()
+    xs, ys = spec.cell_centers()
+    centres = np.stack([xs, ys], axis=-1)
+    for xy in [(0.0, 0.0), (1.52, 0.97), (3.0, 2.0), (2.95, 0.05), (-0.5, 1.0)]:
+        for radius in (0.0, 0.15, 0.2, 0.55):
+            fast = confidence_within(probs, spec, xy, radius)
+            assert fast == pytest.approx(confidence_within(probs, centres, xy, radius), abs=1e-12)

@@ -117,9 +117,28 @@ def confidence_within(
     cell_probs = np.asarray(cell_probs, dtype=float)
     if not (math.isfinite(radius) and radius >= 0.0):
         raise InputError(f"radius must be a distance >= 0 m, got {radius!r}")
+    if isinstance(spec_or_centres, GridSpec) and spec_or_centres.shape == cell_probs.shape:
+        # Only the cells around xy can be within the radius: on a large floor, building every
+        # centre cost far more than the sum (7 ms a call on 30 m x 30 m).
+        spec = spec_or_centres
+        cols = _window(xy[0], radius, spec.x_min, spec.cell_size, spec.nx)
+        rows = _window(xy[1], radius, spec.y_min, spec.cell_size, spec.ny)
+        xs = spec.x_min + (np.arange(*cols) + 0.5) * spec.cell_size
+        ys = spec.y_min + (np.arange(*rows) + 0.5) * spec.cell_size
+        near = np.hypot(xs[None, :] - xy[0], ys[:, None] - xy[1]) <= radius
+        window = cell_probs[rows[0] : rows[1], cols[0] : cols[1]]
+        return float(np.clip(window[near].sum(), 0.0, 1.0))
     centres = _centres(spec_or_centres, cell_probs.shape)
     near = np.hypot(centres[..., 0] - xy[0], centres[..., 1] - xy[1]) <= radius
     return float(np.clip(cell_probs[near].sum(), 0.0, 1.0))
+
+
+def _window(centre: float, radius: float, start: float, cell: float, n: int) -> tuple[int, int]:
+    """[first, last) indices of the cells whose centres may lie within ``radius`` of ``centre``
+    along one axis (one cell of margin each side)."""
+    lo = math.floor((centre - radius - start) / cell) - 1
+    hi = math.ceil((centre + radius - start) / cell) + 1
+    return min(max(lo, 0), n), min(max(hi, 0), n)
 
 
 def _log_within(
