@@ -126,7 +126,7 @@ def test_motion_blur_smears_along_the_turn_by_rate_exposure_and_focal_length() -
     still, _ = effects.apply(step, None, np.random.default_rng(0), (0.0, 0.0))
     assert np.array_equal(still, step)
     rate = math.radians(90.0)  # the VC-C4's top pan speed
-    length = rate * (1 / 60) * (160 / math.tan(math.radians(22.5)))  # about 10 px
+    length = rate * 0.01667 * (160 / math.tan(math.radians(22.5)))  # about 10 px
     assert effects.blur_length((rate, 0.0)) == pytest.approx((length, 0.0))
     panned, _ = effects.apply(step, None, np.random.default_rng(0), (rate, 0.0))
     assert edge_width(panned[120, :, 0].astype(float)) == pytest.approx(0.8 * length, abs=1.5)

@@ -73,7 +73,7 @@ class SimCameraOptions:
     distortion: tuple[float, ...] | None = option(None, doc=LENS_DOCS["distortion"])
     motion_blur: bool = option(True, doc="blur frames by the head's and base's turning")
     exposure_ms: float = option(
-        1000.0 / 60.0, unit="ms", low=0.1, high=200.0, doc="exposure time (an NTSC field)"
+        16.67, unit="ms", low=0.1, high=200.0, doc="exposure time (1/60 s: an NTSC field)"
     )
     auto_exposure: bool = option(True, doc="a lagging gain toward a target mean, clipping")
     exposure_target: float = option(

@@ -90,7 +90,7 @@ class EffectSettings:
 
     lens: Lens | None = None
     motion_blur: bool = True
-    exposure_s: float = 1.0 / 60.0
+    exposure_s: float = 0.01667  # 1/60 s, as the config gives it (16.67 ms)
     auto_exposure: bool = True
     exposure_target: float = 0.45
     exposure_time_constant_s: float = 0.3
