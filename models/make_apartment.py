@@ -141,6 +141,23 @@ def tiles(rng: np.random.Generator) -> np.ndarray:
     return np.clip(img, 0, 255).astype(np.uint8)
 
 
+def grain(rng: np.random.Generator, rgb: tuple[int, int, int], amp: float) -> np.ndarray:
+    """Wood: streaks of blurred noise along x."""
+    n = cv2.GaussianBlur(rng.normal(0, 1, (64, 64)).astype(np.float32), (0, 0), 6, sigmaY=0.7)
+    img = np.array(rgb, np.float32) + amp * n[..., None] * np.array([1, 0.8, 0.6])
+    return np.clip(img, 0, 255).astype(np.uint8)
+
+
+def sky(rng: np.random.Generator) -> np.ndarray:
+    """A window's view: blue sky fading to the horizon, soft clouds, a window bar."""
+    t = np.linspace(0, 1, 64, dtype=np.float32)[:, None, None]
+    img = (1 - t) * np.array([120, 165, 220], np.float32) + t * np.array([200, 215, 230])
+    clouds = cv2.GaussianBlur(rng.normal(0, 1, (64, 64)).astype(np.float32), (0, 0), 4)
+    img = img + 120 * np.clip(clouds, 0, None)[..., None]
+    img[:, 30:34] = (235, 232, 220)
+    return np.clip(img, 0, 255).astype(np.uint8)
+
+
 def noise(rng: np.random.Generator, rgb: tuple[int, int, int], amp: float, blur: float):
     n = cv2.GaussianBlur(rng.normal(0, 1, (64, 64)).astype(np.float32), (0, 0), blur)
     return np.clip(np.array(rgb, np.float32) + amp * n[..., None], 0, 255).astype(np.uint8)
@@ -260,9 +277,17 @@ ASSETS = """  <asset>
     <material name="carpet" texture="carpet" texrepeat="4 4" texuniform="true" specular="0"/>
     <texture name="slate" type="2d" file="../models/textures/slate.png"/>
     <material name="slate" texture="slate" texrepeat="2 2" texuniform="true" specular="0.1"/>
-    <material name="cabinet" rgba="0.90 0.88 0.82 1" specular="0.2"/>
+    <!-- every large surface is textured: a frame filled by one plain colour is refused -->
+    <texture name="cabinet" type="2d" file="../models/textures/cabinet.png"/>
+    <material name="cabinet" texture="cabinet" texrepeat="3 3" texuniform="true"
+              specular="0.2"/>
+    <texture name="oak" type="2d" file="../models/textures/oak.png"/>
+    <material name="oak" texture="oak" texrepeat="3 3" texuniform="true" specular="0.2"/>
+    <texture name="brushed" type="2d" file="../models/textures/brushed.png"/>
+    <texture name="glass" type="2d" file="../models/textures/glass.png"/>
+    <material name="glass" texture="glass" specular="0.5" emission="0.3"/>
     <material name="worktop" rgba="0.30 0.30 0.32 1" specular="0.4"/>
-    <material name="steel" rgba="0.80 0.81 0.82 1" specular="0.7"/>
+    <material name="steel" texture="brushed" texrepeat="4 4" texuniform="true" specular="0.7"/>
     <material name="linen" rgba="0.86 0.84 0.90 1" specular="0"/>
     <material name="blanket" rgba="0.35 0.45 0.60 1" specular="0"/>
   </asset>
@@ -412,7 +437,7 @@ def scene_xml(rng: np.random.Generator) -> str:
     <geom name="poster_art" class="decor" type="box" pos="0.995 0.012 1.55" size="0.22 0.003 0.25"
           rgba="0.25 0.35 0.55 1"/>
     <geom name="window_living" class="decor" type="box" pos="0.005 3.4 1.45" size="0.005 0.5 0.55"
-          material="window"/>
+          material="glass"/>
 
     <!-- the living room's furniture and the rice box, as in scenes/living_room.xml -->
     <include file="../models/living_room_furniture.xml"/>
@@ -425,7 +450,7 @@ def scene_xml(rng: np.random.Generator) -> str:
     <geom name="doormat" class="decor" type="box" pos="0.45 7.05 0.004" size="0.3 0.45 0.002"
           rgba="0.45 0.30 0.20 1"/>
     <geom name="mirror" class="decor" type="box" pos="3.0 7.995 1.4" size="0.35 0.005 0.5"
-          rgba="0.75 0.82 0.85 1" material="window"/>
+          material="glass"/>
     <body name="coat_rack" pos="0.35 7.7 0" childclass="furniture">
       <geom name="coat_rack_foot" type="cylinder" pos="0 0 0.02" size="0.2 0.02" material="metal"/>
       <geom name="coat_rack_pole" class="leg" pos="0 0 0.9" size="0.02 0.88"/>
@@ -439,7 +464,7 @@ def scene_xml(rng: np.random.Generator) -> str:
     <body name="shoe_cabinet" pos="1.6 7.82 0" childclass="furniture">
       <geom name="shoe_cabinet_body" pos="0 0 0.45" size="0.6 0.18 0.45" material="cabinet"/>
       <geom name="shoe_cabinet_front" class="decor" type="box" pos="0 -0.182 0.45"
-            size="0.58 0.003 0.42" material="wood_light"/>
+            size="0.58 0.003 0.42" material="oak"/>
       <geom name="shoe_cabinet_bowl" class="decor" type="cylinder" pos="-0.3 0 0.92"
             size="0.1 0.02" rgba="0.20 0.45 0.70 1"/>
     </body>
@@ -449,26 +474,26 @@ def scene_xml(rng: np.random.Generator) -> str:
 
     <!-- kitchen: counters on the top and right walls with wall cabinets, fridge, table, stools -->
     <geom name="window_kitchen" class="decor" type="box" pos="9.995 4.55 1.45"
-          size="0.005 0.3 0.5" material="window"/>
+          size="0.005 0.3 0.5" material="glass"/>
     <geom name="kitchen_clock" class="decor" type="cylinder" pos="4.605 5.9 1.8" size="0.14 0.005"
           zaxis="1 0 0" rgba="0.85 0.25 0.20 1"/>
     <body name="kitchen_counter" pos="7.6 7.7 0" childclass="furniture">
       <geom name="kitchen_counter_body" pos="0 0.01 0.44" size="1.6 0.29 0.42" material="cabinet"/>
       <geom name="kitchen_counter_top" pos="0 0 0.88" size="1.6 0.3 0.02" material="worktop"/>
       <geom name="kitchen_counter_doors" class="decor" type="box" pos="0 -0.282 0.46"
-            size="1.56 0.003 0.36" material="wood_light"/>
+            size="1.56 0.003 0.36" material="oak"/>
       <geom name="kitchen_oven" class="decor" type="box" pos="0.8 -0.287 0.45"
             size="0.3 0.003 0.3" material="screen"/>
       <geom name="kitchen_kettle" class="decor" type="cylinder" pos="-1.2 0.05 0.99"
             size="0.08 0.09" material="steel"/>
       <geom name="kitchen_board" class="decor" type="box" pos="0.9 0.1 0.91" size="0.22 0.14 0.01"
-            material="wood_light"/>
+            material="oak"/>
     </body>
     <body name="kitchen_wall_cabinet" pos="7.6 7.825 0" childclass="furniture">
       <geom name="kitchen_wall_cabinet_body" pos="0 0 1.8" size="1.6 0.175 0.35"
             material="cabinet"/>
       <geom name="kitchen_wall_cabinet_doors" class="decor" type="box" pos="0 -0.178 1.8"
-            size="1.56 0.003 0.32" material="wood_light"/>
+            size="1.56 0.003 0.32" material="oak"/>
     </body>
     <body name="fridge" pos="9.65 7.65 0" childclass="furniture">
       <geom name="fridge_body" pos="0 0 0.925" size="0.35 0.35 0.925" material="steel"/>
@@ -513,13 +538,13 @@ def scene_xml(rng: np.random.Generator) -> str:
 
     <!-- bedroom: bed with headboard on the right wall, nightstand, wardrobe, desk, bookshelf -->
     <geom name="window_bedroom" class="decor" type="box" pos="9.0 0.005 1.45" size="0.6 0.005 0.5"
-          material="window"/>
+          material="glass"/>
     <geom name="bedroom_picture" class="decor" type="box" pos="7.5 0.005 1.5" size="0.4 0.005 0.3"
           rgba="0.80 0.45 0.25 1"/>
     <geom name="bedroom_rug" class="decor" type="box" pos="6.8 1.9 0.004" size="0.8 0.6 0.002"
           rgba="0.70 0.55 0.40 1"/>
     <body name="bed" pos="8.925 2.0 0" childclass="furniture">
-      <geom name="bed_frame" pos="0 0 0.15" size="1.025 0.8 0.15" material="wood_light"/>
+      <geom name="bed_frame" pos="0 0 0.15" size="1.025 0.8 0.15" material="oak"/>
       <geom name="bed_mattress" pos="-0.02 0 0.4" size="1.0 0.78 0.1" material="linen"/>
       <geom name="bed_headboard" pos="0.975 0 0.55" size="0.05 0.8 0.55" material="wood_dark"/>
       <geom name="bed_blanket" class="decor" type="box" pos="-0.3 0 0.51" size="0.72 0.8 0.015"
@@ -535,7 +560,7 @@ def scene_xml(rng: np.random.Generator) -> str:
             material="cream"/>
     </body>
     <body name="wardrobe" pos="5.6 0.31 0" childclass="furniture">
-      <geom name="wardrobe_body" pos="0 0 1.0" size="0.6 0.3 1.0" material="wood_light"/>
+      <geom name="wardrobe_body" pos="0 0 1.0" size="0.6 0.3 1.0" material="oak"/>
       <geom name="wardrobe_split" class="decor" type="box" pos="0 -0.302 1.0"
             size="0.005 0.003 0.95" material="wood_dark"/>
       <geom name="wardrobe_handle_a" class="decor" type="box" pos="-0.05 -0.305 1.0"
@@ -544,8 +569,8 @@ def scene_xml(rng: np.random.Generator) -> str:
             size="0.01 0.005 0.12" material="metal"/>
     </body>
     <body name="desk" pos="4.9 2.4 0" euler="0 0 1.5708" childclass="furniture">
-      <geom name="desk_top" pos="0 0 0.735" size="0.6 0.3 0.02" material="wood_light"/>
-      <geom name="desk_drawers" pos="0.4 0 0.36" size="0.18 0.28 0.36" material="wood_light"/>
+      <geom name="desk_top" pos="0 0 0.735" size="0.6 0.3 0.02" material="oak"/>
+      <geom name="desk_drawers" pos="0.4 0 0.36" size="0.18 0.28 0.36" material="oak"/>
       <geom name="desk_leg0" class="leg" pos="-0.55 0.25 0.36" size="0.025 0.36"/>
       <geom name="desk_leg1" class="leg" pos="-0.55 -0.25 0.36" size="0.025 0.36"/>
       <geom name="desk_lamp" class="decor" type="cylinder" pos="-0.4 0.15 0.85" size="0.06 0.1"
@@ -586,6 +611,10 @@ def main(models: Path = HERE, scenes: Path = SCENES) -> None:
     _write_png(tex / "tiles.png", tiles(rng))
     _write_png(tex / "carpet.png", noise(rng, (120, 110, 130), 10.0, 0.7))
     _write_png(tex / "slate.png", noise(rng, (95, 100, 105), 12.0, 2.0))
+    _write_png(tex / "cabinet.png", noise(rng, (228, 224, 212), 6.0, 1.5))
+    _write_png(tex / "oak.png", grain(rng, (200, 160, 110), 45.0))
+    _write_png(tex / "brushed.png", grain(rng, (200, 202, 205), 25.0))
+    _write_png(tex / "glass.png", sky(rng))
     scenes.mkdir(parents=True, exist_ok=True)
     (scenes / "apartment.xml").write_text(scene_xml(rng))
 

@@ -12,6 +12,11 @@ A spot is kept only if the object
 * and, for random draws, could be seen: from at least one free spot on the floor around it, a
   camera at 1.0 m sees ``VISIBLE_ENOUGH`` of the object's faces that face it (``best_view``).
 
+Several objects at once (``place_targets``): each on a support of the kind it belongs to
+(``SUPPORT_KINDS``: the floor, a table top, a counter, a shelf, by height), as the scene declares
+(``World.target_supports``) or the caller says, apart from one another, and each still in view
+with the others placed.
+
 The robot is no part of the room: it moves, so it neither supports, blocks nor hides anything.
 Surfaces come from ``twin.sim.supports`` (exact for the scenes' primitive geoms).
 """
@@ -19,7 +24,7 @@ Surfaces come from ``twin.sim.supports`` (exact for the scenes' primitive geoms)
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 
 import mujoco
 import numpy as np
@@ -38,6 +43,19 @@ CAMERA_HEIGHT = 1.0  # metres: the robot's camera above the floor
 VIEW_RADII = (1.0, 1.5, 2.0, 2.5)  # metres from the object where a camera may stand
 VIEW_BEARINGS = 16  # directions per radius
 VIEW_CLEARANCE = 0.25  # metres: a camera spot keeps this far from walls and furniture
+STANDING_FACE = 0.99  # a face whose normal points this straight down is the one it stands on
+# The kinds of support an object may belong to, by the height (metres, inclusive) of the surface
+# it stands on: the floor and what lies flat on it (a rug, tiles); seats, coffee, dining and
+# bedside tables and desks; kitchen counters and cabinets of counter height; shelves between the
+# 1.0 m camera and a reaching hand (not a bed's headboard, 1.1 m).
+SUPPORT_KINDS: dict[str, tuple[float, float]] = {
+    "floor": (0.0, 0.05),
+    "table": (0.3, 0.8),
+    "counter": (0.8, 1.0),
+    "shelf": (1.12, 1.65),
+}
+SPOT_STEP = 0.05  # metres: the grid on which place_targets finds where each kind of support is
+PARK = -1000.0  # metres: where targets wait, far outside any room, while others are placed
 
 
 def visible_fraction(world: World, body: str, camera: Sequence[float], per_side: int = 4) -> float:
@@ -45,7 +63,9 @@ def visible_fraction(world: World, body: str, camera: Sequence[float], per_side:
     there sees: is this placement fair, could it have been found from there?
 
     The faces of each of the body's geoms (their bounding boxes: the faces themselves for a
-    box) that face the camera are sampled on a ``per_side`` x ``per_side`` grid; a sample
+    box) that face the camera, except a face turned straight down (what it stands on covers
+    that one: a camera below a shelf would otherwise never see enough of a box on it), are
+    sampled on a ``per_side`` x ``per_side`` grid; a sample
     counts as seen when the ray from the camera to it meets the object before anything drawn
     (groups 0-2) in the room. Only rays that would meet the object were the room empty are
     counted, so a round geom's box corners do not count against it. The robot is ignored: a
@@ -183,7 +203,156 @@ def random_surface_pose(
     )
 
 
+def place_targets(
+    world: World,
+    rng: np.random.Generator,
+    supports: Mapping[str, Sequence[str]] | None = None,
+    separation: float = 0.5,
+    tries: int = 2000,
+    rounds: int = 5,
+) -> dict[str, Pose2D]:
+    """Move several targets at once to random fair spots, each on a support of its kind; returns
+    each one's pose (name -> Pose2D), in the order placed.
+
+    ``supports`` maps each target body to the kinds it may stand on (keys of ``SUPPORT_KINDS``);
+    by default the scene's ``World.target_supports()``, and any scene target it does not name
+    stays where it is. Each target in turn takes the first fair spot drawn: a kind at random
+    among its own, a point where that kind has a level the target fits on (a ``SPOT_STEP`` grid
+    over the floor for "floor", over the furniture's footprints otherwise, jittered within its
+    cell), a random yaw and a random one of the levels there within the kind's heights; it must
+    be ``separation`` metres (plan distance between centres) from the targets placed before it,
+    and none of their geoms may overlap. Once all stand,
+    each must still show ``VISIBLE_ENOUGH`` of itself from some free floor spot (another target
+    may hide it), or the whole placement is drawn again, up to ``rounds`` times. The same
+    ``rng`` state and world give the same spots. Raises ``TwinError`` (every target back where
+    it was) when no placement is found, ``InputError`` for an unknown target or kind.
+    """
+    wanted = dict(world.target_supports() if supports is None else supports)
+    if not wanted:
+        raise InputError(
+            f"{world.path.name}: no target has support kinds; give supports= or the scene's "
+            '"twin_target_supports" custom text (e.g. "rice_box:table")'
+        )
+    for name, kinds in wanted.items():
+        world.body_id(name)
+        unknown = [k for k in kinds if k not in SUPPORT_KINDS] or ([] if kinds else ["(none)"])
+        if unknown:
+            raise InputError(
+                f"target {name!r}: unknown support kind {unknown[0]!r}; use "
+                f"{', '.join(SUPPORT_KINDS)}"
+            )
+    if not (math.isfinite(separation) and separation >= 0):
+        raise InputError(f"separation must be a distance >= 0 m, got {separation!r}")
+    model = world.model
+    ids = {name: world.body_id(name) for name in wanted}
+    saved = {name: (model.body_pos[b].copy(), model.body_quat[b].copy()) for name, b in ids.items()}
+    floor = _FreeFloor(world, VIEW_CLEARANCE)
+    spots: dict[str, dict[str, np.ndarray]] = {}
+    for _ in range(rounds):
+        for k, body in enumerate(ids.values()):  # out of the way of one another
+            model.body_pos[body] = (PARK - 10.0 * k, PARK, 0.0)
+        world.forward()
+        if not spots:
+            spots = {n: {k: _kind_spots(world, n, k) for k in set(ks)} for n, ks in wanted.items()}
+        placed: dict[str, Pose2D] = {}
+        for name, kinds in wanted.items():
+            pose = _place_one(
+                world, name, kinds, rng, spots[name], placed, separation, tries, floor
+            )
+            if pose is None:
+                break
+            placed[name] = pose
+        else:
+            if all(_seen(world, name, floor) for name in placed):
+                return placed
+    for name, body in ids.items():
+        model.body_pos[body], model.body_quat[body] = saved[name]
+    world.forward()
+    raise TwinError(
+        f"found no fair placement of {', '.join(wanted)} on their supports in {rounds} rounds of "
+        f"{tries} tries each; allow more kinds, a smaller separation, or more tries"
+    )
+
+
 # -- internals -------------------------------------------------------------------------------
+
+
+def _place_one(
+    world: World,
+    name: str,
+    kinds: Sequence[str],
+    rng: np.random.Generator,
+    spots: Mapping[str, np.ndarray],
+    placed: Mapping[str, Pose2D],
+    separation: float,
+    tries: int,
+    floor: _FreeFloor,
+) -> Pose2D | None:
+    """One target on a fair spot of one of its kinds, away from ``placed``; None if none.
+    ``spots`` holds, per kind, the (M, 2) grid points where the kind has a level the target
+    fits on (``_kind_spots``); a draw is one of them jittered within its cell."""
+    placer = _Placer(world, name)  # built now: the room holds the targets placed so far
+    usable = [k for k in kinds if len(spots[k])]
+    for _ in range(tries if usable else 0):
+        kind = usable[int(rng.integers(len(usable)))]
+        low, high = SUPPORT_KINDS[kind]
+        x, y = spots[kind][int(rng.integers(len(spots[kind])))] + rng.uniform(
+            -SPOT_STEP / 2, SPOT_STEP / 2, 2
+        )
+        x, y = float(x), float(y)
+        yaw = float(rng.uniform(-math.pi, math.pi))
+        if any(math.hypot(x - p.x, y - p.y) < separation for p in placed.values()):
+            continue
+        levels = [h for h in placer.levels_at(x, y) if low <= h <= high]
+        if not levels:
+            continue
+        level = levels[int(rng.integers(len(levels)))]
+        if placer.try_place(x, y, yaw, level) is not None:
+            continue
+        if _seen(world, name, floor):
+            return world.body_pose(name)
+    placer.restore()
+    return None
+
+
+def _kind_spots(world: World, name: str, kind: str) -> np.ndarray:
+    """(M, 2) points, ``SPOT_STEP`` metres apart, where a surface of ``kind`` has room above it
+    for the target ``name`` (the other targets out of the way), over the furniture's
+    footprints; for "floor", every point of the floor. Drawing among these instead of over
+    every footprint keeps a shelf-sized kind from wasting its tries on walls and table tops."""
+    placer = _Placer(world, name)
+    low, high = SUPPORT_KINDS[kind]
+    xmin, ymin, xmax, ymax = world.room_bounds()
+    if kind == "floor":  # most of it is free: every point, the levels checked at the draw
+        gx, gy = np.meshgrid(
+            np.arange(xmin + SPOT_STEP / 2, xmax, SPOT_STEP),
+            np.arange(ymin + SPOT_STEP / 2, ymax, SPOT_STEP),
+        )
+        return np.column_stack([gx.ravel(), gy.ravel()])
+    boxes = [f.aabb for f in (world.footprint(n) for n in world.furniture()) if f.top >= low]
+    found = [np.zeros((0, 2))]
+    for bx0, by0, bx1, by1 in boxes:
+        xs = np.arange(bx0 + SPOT_STEP / 2, bx1, SPOT_STEP)
+        ys = np.arange(by0 + SPOT_STEP / 2, by1, SPOT_STEP)
+        if len(xs) == 0 or len(ys) == 0:
+            continue
+        gx, gy = np.meshgrid(xs, ys)
+        points = np.column_stack([gx.ravel(), gy.ravel()])
+        lo, hi = placer.room_xy
+        near = (lo[:, 0] <= bx1) & (hi[:, 0] >= bx0) & (lo[:, 1] <= by1) & (hi[:, 1] >= by0)
+        spans = vertical_spans(world, placer.room[near], points)
+        levels = spans.levels(headroom=placer.height + HEAD_MARGIN)
+        with np.errstate(invalid="ignore"):
+            fits = ((levels >= low) & (levels <= high)).any(axis=0)
+        found.append(points[fits])
+    return np.concatenate(found)
+
+
+def _seen(world: World, name: str, floor: _FreeFloor) -> bool:
+    """Whether ``VISIBLE_ENOUGH`` of the body shows from a free floor spot around it."""
+    x, y, _ = world.body_position(name)
+    spots = floor.ring(float(x), float(y), VIEW_RADII, VIEW_BEARINGS, CAMERA_HEIGHT)
+    return _best_of(world, name, spots, VISIBLE_ENOUGH)[0] >= VISIBLE_ENOUGH
 
 
 class _Placer:
@@ -344,6 +513,8 @@ def _facing_samples(world: World, geom: int, eye: np.ndarray, per_side: int) -> 
             normal = sign * rot[:, axis]
             face = centre + normal * half[axis]
             if np.dot(eye - face, normal) <= 1e-9 or half[axis] <= 0:
+                continue
+            if normal[2] < -STANDING_FACE:  # what it stands on covers it: no camera sees it
                 continue
             a, b = [i for i in range(3) if i != axis]
             out.append(face + np.outer(u * half[a], rot[:, a]) + np.outer(v * half[b], rot[:, b]))

@@ -210,6 +210,23 @@ class World:
         text = self._custom_text("twin_targets") or ""
         return tuple(text.replace(",", " ").split())
 
+    def target_supports(self) -> dict[str, tuple[str, ...]]:
+        """Each target's kinds of support (custom text ``twin_target_supports``: entries
+        "name:kind" or "name:kind|kind" separated by spaces, kinds as in
+        ``twin.sim.placement.SUPPORT_KINDS``); targets it does not name are left out."""
+        text = self._custom_text("twin_target_supports") or ""
+        found: dict[str, tuple[str, ...]] = {}
+        targets = self.targets()
+        for entry in text.split():
+            name, _, kinds = entry.partition(":")
+            if name not in targets or not kinds:
+                raise InputError(
+                    f"{self.path.name}: twin_target_supports entry {entry!r} must be "
+                    f'"target:kind" for one of the targets {", ".join(targets)}'
+                )
+            found[name] = tuple(kinds.split("|"))
+        return found
+
     def robot_start(self) -> Pose2D | None:
         """The scene's suggested robot start (custom numeric ``twin_robot_start``), or None."""
         values = self._custom_numeric("twin_robot_start")
