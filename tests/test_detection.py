@@ -64,3 +64,31 @@ def test_model_files_and_a_lone_scene_object_mix(tmp_path, counted_training):
     detector = prepare_detector(objects, PARAMS, tmp_path / "cache", say=lambda _: None)
     assert detector.names == ["red_box", "blue_box"]
     assert counted_training == ["blue_box"]
+
+
+def test_scene_objects_are_trained_from_the_recipes_elevations(tmp_path, monkeypatch):
+    from twin.app.detection import TRAINING_RECIPE
+
+    drops = []
+
+    def training_views(target=None, scene="training_stage", camera_drop=0.4, **_):
+        drops.append(camera_drop)
+        return synthetic_views(target, scene)
+
+    monkeypatch.setattr(twin.sim, "training_views", training_views)
+    prepare_detector([ObjectConfig("red_box", None, "red_box")], PARAMS, tmp_path, lambda _: None)
+    assert drops == [TRAINING_RECIPE["camera_drops"]]
+
+
+def test_training_views_from_several_elevations():
+    from twin.core.errors import InputError
+    from twin.sim.training import training_views
+
+    images, masks = training_views(distances=(1.0,), angles=(0.0, 1.0), camera_drop=(0.9, 0.0))
+    assert images.shape == (4, 240, 320, 3) and masks.shape == (4, 240, 320)
+    # The same azimuth from above and level: the box is centred in both, its outline differs.
+    above, level = masks[0], masks[2]
+    assert above[120, 160] and level[120, 160]
+    assert (above != level).mean() > 0.01
+    with pytest.raises(InputError, match="camera_drop"):
+        training_views(distances=(1.0,), angles=(0.0,), camera_drop=(0.4, float("nan")))

@@ -124,7 +124,7 @@ class RFCHParams:
     patch_size: int = 32
     stride: int = 16
     views: str = "merged"
-    view_similarity: float = 0.6
+    view_similarity: float = 0.35
     max_view_models: int = 4
 
     def __post_init__(self) -> None:
