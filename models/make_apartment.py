@@ -500,7 +500,7 @@ def scene_xml(rng: np.random.Generator) -> str:
       <geom name="fridge_handle" class="decor" type="box" pos="-0.36 -0.2 1.1"
             size="0.01 0.015 0.25" material="metal"/>
     </body>
-    <body name="kitchen_side_counter" pos="9.7 6.1 0" childclass="furniture">
+    <body name="kitchen_side_counter" pos="9.7 6.12 0" childclass="furniture">
       <geom name="kitchen_side_counter_body" pos="0.01 0 0.44" size="0.29 1.1 0.42"
             material="cabinet"/>
       <geom name="kitchen_side_counter_top" pos="0 0 0.88" size="0.3 1.1 0.02" material="worktop"/>
@@ -543,8 +543,9 @@ def scene_xml(rng: np.random.Generator) -> str:
           rgba="0.80 0.45 0.25 1"/>
     <geom name="bedroom_rug" class="decor" type="box" pos="6.8 1.9 0.004" size="0.8 0.6 0.002"
           rgba="0.70 0.55 0.40 1"/>
+    <!-- no top exactly at the laser's 0.30 m: a grazing return would fall between map cells -->
     <body name="bed" pos="8.925 2.0 0" childclass="furniture">
-      <geom name="bed_frame" pos="0 0 0.15" size="1.025 0.8 0.15" material="oak"/>
+      <geom name="bed_frame" pos="0 0 0.145" size="1.025 0.8 0.145" material="oak"/>
       <geom name="bed_mattress" pos="-0.02 0 0.4" size="1.0 0.78 0.1" material="linen"/>
       <geom name="bed_headboard" pos="0.975 0 0.55" size="0.05 0.8 0.55" material="wood_dark"/>
       <geom name="bed_blanket" class="decor" type="box" pos="-0.3 0 0.51" size="0.72 0.8 0.015"

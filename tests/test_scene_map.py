@@ -248,18 +248,34 @@ def mujoco_ranges(world, sensor: Pose2D, angles: np.ndarray, max_range: float = 
     return np.where((geoms >= 0) & (dist > 0) & (dist < max_range), dist, np.nan)
 
 
-def test_mujoco_rays_end_on_occupied_cells(living_room):
-    world, cut = living_room
+# free spots to cast from, per scene: in the apartment one in each room and its doors' reach
+SENSOR_SPOTS = {
+    "living_room": [(2.25, 2.5), (1.2, 3.0), (3.0, 4.0), (2.5, 1.0), (2.2, 5.6)],
+    "apartment": [(2.25, 2.5), (1.0, 6.9), (5.6, 6.6), (8.6, 5.0), (6.2, 2.2)],
+}
+
+
+@pytest.fixture(scope="module", params=sorted(SENSOR_SPOTS))
+def any_scene(request, living_room):
+    """(world, its scene map, spots to cast from) for each scene the invariants hold in."""
+    if request.param == "living_room":
+        return (*living_room, SENSOR_SPOTS["living_room"])
+    world = World(request.param)
+    return world, scene_map(world), SENSOR_SPOTS[request.param]
+
+
+def test_mujoco_rays_end_on_occupied_cells(any_scene):
+    world, cut, spots = any_scene
     robot_out_of_the_way(world)
     angles = np.linspace(-math.pi, math.pi, 720, endpoint=False)
-    for x, y in [(2.25, 2.5), (1.2, 3.0), (3.0, 4.0), (2.5, 1.0), (2.2, 5.6)]:
+    for x, y in spots:
         sensor = Pose2D(x, y, 0.0)
-        truth = mujoco_ranges(world, sensor, angles)
-        assert np.isfinite(truth).all()  # a closed room
+        truth = mujoco_ranges(world, sensor, angles, 15.0)
+        assert np.isfinite(truth).all()  # a closed room (or flat: rooms behind open doors)
         ends = np.stack([x + (truth + 1e-4) * np.cos(angles), y + (truth + 1e-4) * np.sin(angles)])
         row, col = cut.cell_of(ends[0], ends[1])
         assert cut.occupied[row, col].all()  # every return lies on something the map has
-        mapped = raycast(cut, sensor, angles, 8.0)
+        mapped = raycast(cut, sensor, angles, 15.0)
         assert (mapped <= truth + 1e-6).all()  # the map is conservative ...
         # ... and never by a phantom: where the map stops a beam, MuJoCo has geometry within
         # a cell's diagonal of that point

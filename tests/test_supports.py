@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 
+import mujoco
 import numpy as np
 import pytest
 
@@ -79,3 +80,19 @@ def test_bad_cell_size_is_refused(world: World) -> None:
         support_levels(world, cell_size=-0.1)
     with pytest.raises(InputError, match="max height"):
         support_levels(world, max_height=math.nan)
+
+
+@pytest.mark.parametrize("scene", ["living_room", "apartment"])
+def test_every_target_stands_on_a_level_of_the_map_and_the_grid_covers_the_floor(scene) -> None:
+    world = World(scene)
+    levels = support_levels(world)
+    x0, y0, x1, y1 = world.room_bounds()
+    assert levels.levels.shape[:2] == (round((y1 - y0) / 0.1), round((x1 - x0) / 0.1))
+    floor = levels.levels[..., 0] <= 0.005  # the floor, or a rug or tiles on it
+    assert floor.mean() > 0.5  # most of the floor is free floor
+    for name in world.targets():
+        geom = mujoco.mj_name2id(world.model, mujoco.mjtObj.mjOBJ_GEOM, name)
+        x, y, z = world.body_position(name)
+        bottom = z - world.model.geom_size[geom][2]
+        here = _at(levels, x, y)
+        assert min(abs(h - bottom) for h in here) < 0.005, (name, bottom, here)
