@@ -47,9 +47,14 @@ def test_each_model_file_compiles_alone_or_is_included_by_a_scene(path) -> None:
     text = path.read_text()
     if "<worldbody>" in text or "<asset>" in text:
         mujoco.MjModel.from_xml_path(str(path))
-    else:  # a fragment meant for <include> inside a body
-        scenes = [p.read_text() for p in scenes_dir().glob("*.xml")]
-        assert any(f'file="../models/{path.name}"' in s for s in scenes), path.name
+    else:  # a fragment meant for <include> inside a body, by a scene or by a fragment it includes
+        included = {p.name for p in scenes_dir().glob("*.xml")}
+        texts = {p.name: p.read_text() for p in [*scenes_dir().glob("*.xml"), *MODELS]}
+        for _ in range(len(texts)):  # follow includes down to any depth
+            for name in texts:
+                if any(f'file="../models/{name}"' in texts[i] for i in included):
+                    included.add(name)
+        assert path.name in included, path.name
 
 
 def test_assets_script_reproduces_the_committed_files(tmp_path) -> None:
