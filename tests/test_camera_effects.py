@@ -295,3 +295,31 @@ def test_pixel_rays_point_at_rendered_corners_with_the_head_tilted(lensed, tilt_
     truth = np.stack([true_bearing, true_elevation], axis=1)[None, :, :]
     nearest = np.degrees(np.linalg.norm(seen - truth, axis=2).min(axis=1))
     assert nearest.max() < 0.04  # 0.26 px at the lens's focal length
+
+
+def test_a_restarted_camera_sees_what_a_fresh_one_does(room: SimRobot) -> None:
+    """A batch reuses its world between runs: restart puts the noise, exposure and white
+    balance back to power-on, so a run does not depend on the runs before it."""
+    true = CameraModel.with_lens(320, 240, LENS)
+    camera = SimCamera(room, true, effects=CameraEffects(EffectSettings(lens=LENS), 320, 240))
+    with camera:
+        first = camera.grab().image
+        camera.grab()
+        camera.restart()
+        again = camera.grab().image
+        camera.restart(seed=9)
+        other = camera.grab().image
+    assert np.array_equal(first, again) and not np.array_equal(first, other)
+
+
+def test_a_world_reset_restarts_the_camera_by_itself() -> None:
+    robot = SimRobot(World("living_room"), GOLDEN_POSE)
+    true = CameraModel.with_lens(320, 240, LENS)
+    camera = SimCamera(robot, true, effects=CameraEffects(EffectSettings(lens=LENS), 320, 240))
+    with camera:
+        first = camera.grab().image
+        robot.advance(0.5)
+        camera.grab()
+        robot.world.reset()
+        robot.place(GOLDEN_POSE)
+        assert np.array_equal(camera.grab().image, first)

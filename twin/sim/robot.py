@@ -553,6 +553,19 @@ class SimCamera(_SimDevice, Camera):
             self._renderer = None
         self._connected = False
 
+    def restart(self, seed: int | None = None) -> None:
+        """As after power-on in a world that was reset: the noise restarts from ``seed`` (the
+        camera's own by default; a batch may give each run its own) and the exposure and white
+        balance forget what they had settled on, so a mission in a reused world sees what it
+        would in a fresh one."""
+        with self.robot.lock:
+            if seed is not None:
+                self.seed = seed
+            self._rng = np.random.default_rng(self.seed)
+            self._last_grab = None
+            if self.effects is not None:
+                self.effects.reset()
+
     def rates(self) -> tuple[float, float]:
         """The camera's (horizontal, vertical) angular rates now, rad/s: pan plus the base's
         turn, and tilt (what smears a frame during its exposure)."""
@@ -570,6 +583,8 @@ class SimCamera(_SimDevice, Camera):
                 image = self._renderer.render(data)
                 depth = self._renderer.depth(data) if self.depth else None
                 return Frame(image, now, depth)
+            if self._last_grab is not None and now < self._last_grab:
+                self.restart()  # the world's clock ran back: it was reset, as at power-on
             image, depth = self._render_canvas(data)
             dt = None if self._last_grab is None else now - self._last_grab
             self._last_grab = now
