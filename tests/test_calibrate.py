@@ -25,7 +25,7 @@ from twin.app.calibrate import (
     with_calibration,
 )
 from twin.app.config import ConfigError, load_config
-from twin.app.factory import build_robot, configured_lens
+from twin.app.factory import build_camera, configured_lens
 from twin.cli import main
 from twin.core.errors import InputError
 from twin.core.geometry import CameraModel, Pose2D
@@ -38,10 +38,10 @@ SPANS = np.array([[u, u + 32.0] for u in range(0, 289, 16)])  # the detector's p
 def grabbed() -> tuple[list[np.ndarray], CameraModel]:
     """20 frames of the board from the twin's default (realistic) camera, and its true model."""
     config = load_config("calibration_board")
-    robot, context = build_robot(config)
-    with robot:
-        frames = frames_from_camera(robot, context.sim_in_use, 20, 0.0, 0, lambda _: None)
-    return frames, robot.camera.model
+    camera, context = build_camera(config)
+    with camera:
+        frames = frames_from_camera(camera, context.sim_in_use, 20, 0.0, 0, lambda _: None)
+    return frames, camera.model
 
 
 @pytest.fixture(scope="module")
@@ -94,8 +94,8 @@ def test_the_command_writes_into_the_config_keeping_comments_and_the_twin_uses_i
     again = config.read_text()
     assert again.count("intrinsics") == 1 and again.count("# calibrated by") == 1
     loaded = load_config(config, overrides=('robot.camera.lens_model="calibrated"',))
-    robot, _ = build_robot(loaded)
-    assert robot.camera.model.lens.intrinsics == pytest.approx(
+    camera, _ = build_camera(loaded)
+    assert camera.model.lens.intrinsics == pytest.approx(
         tomllib.loads(again)["robot"]["camera"]["intrinsics"]
     )
 
@@ -122,7 +122,7 @@ def test_a_calibrated_lens_in_a_config_is_checked_with_the_device_and_remedy() -
     lens = configured_lens("x", 320, 240, (300.0, 300.0, 160.0, 120.0), (-0.2, 0, 0, 0, 0))
     assert lens is not None and lens.k1 == -0.2
     with pytest.raises(ConfigError, match='lens_model = "calibrated" needs intrinsics'):
-        build_robot(
+        build_camera(
             load_config("calibration_board", overrides=('robot.camera.lens_model="calibrated"',))
         )
 

@@ -173,14 +173,14 @@ def _rotation(yaw: float, pitch: float, roll: float) -> np.ndarray:
 
 
 def frames_from_camera(
-    robot,  # twin.core.devices.Robot, connected
+    camera,  # twin.core.devices.Camera, connected
     sim,  # twin.sim.robot.SimRobot | None: the twin, which can move the board itself
     count: int,
     interval_s: float,
     seed: int,
     say: Callable[[str], None],
 ) -> list[np.ndarray]:
-    """``count`` frames from ``robot.camera``. In the twin, the scene's board is put at a new
+    """``count`` frames from ``camera``. In the twin, the scene's board is put at a new
     pose (``board_poses``) before each grab; with a real camera, the user moves the board
     during the ``interval_s`` seconds before each grab."""
     mover = _board_mover(sim) if sim is not None else None
@@ -191,8 +191,8 @@ def frames_from_camera(
             mover(*next(poses))
         else:
             say(f"frame {i + 1}/{count} in {interval_s:g} s: hold the board still, elsewhere")
-            _sleep(robot.camera, interval_s)
-        frames.append(robot.camera.grab().image)
+            _sleep(camera, interval_s)
+        frames.append(camera.grab().image)
     return frames
 
 

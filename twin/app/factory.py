@@ -309,6 +309,19 @@ def build_robot(
     return Robot(devices["camera"], devices["pantilt"], base, laser), context
 
 
+def build_camera(config: SurveyConfig) -> tuple[Device, BuildContext]:
+    """The config's camera alone (not yet connected) and its context: what a calibration
+    needs, without opening the base's or the head's ports."""
+    context = BuildContext(config)
+    try:
+        device = config.devices["camera"]
+        camera = _factory(device)(device, context)
+    except BaseException:
+        context.close()
+        raise
+    return camera, context
+
+
 def localized_base(config: SurveyConfig, context: BuildContext, base, laser) -> Device:
     """``base`` localized by ``laser`` on the config's map (a map_server file, or the scene
     cut at the laser's height in the twin), starting around the mission's start pose."""

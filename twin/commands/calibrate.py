@@ -97,13 +97,13 @@ def _target(args: argparse.Namespace, resolve_config, shipped: Path, error) -> P
 
 
 def _grab(config, args: argparse.Namespace, frames_from_camera) -> list:
-    from twin.app.factory import build_robot
+    from twin.app.factory import build_camera
 
-    robot, context = build_robot(config)
+    camera, context = build_camera(config)  # the camera alone: no base or head port opened
     try:
-        with robot:
+        with camera:
             return frames_from_camera(
-                robot, context.sim_in_use, args.frames, args.interval, args.seed, print
+                camera, context.sim_in_use, args.frames, args.interval, args.seed, print
             )
     finally:
         context.close()
