@@ -120,7 +120,10 @@ class EffectSettings:
 
     @property
     def is_ideal(self) -> bool:
-        return self == EffectSettings.ideal()
+        """True when no effect runs (whatever the parameters of the ones switched off)."""
+        switches = (self.motion_blur, self.auto_exposure, self.white_balance, self.noise,
+                    self.analog, self.jpeg_quality > 0)  # fmt: skip
+        return self.lens is None and not any(switches)
 
 
 @dataclass
