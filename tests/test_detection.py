@@ -78,6 +78,9 @@ def test_scene_objects_are_trained_from_the_recipes_elevations(tmp_path, monkeyp
     monkeypatch.setattr(twin.sim, "training_views", training_views)
     prepare_detector([ObjectConfig("red_box", None, "red_box")], PARAMS, tmp_path, lambda _: None)
     assert drops == [TRAINING_RECIPE["camera_drops"]]
+    from twin.sim.training import ELEVATION_DROPS
+
+    assert TRAINING_RECIPE["camera_drops"] == ELEVATION_DROPS  # the floor, table, counter, shelf
 
 
 def test_training_views_from_several_elevations():

@@ -235,16 +235,23 @@ def pair_counts(
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
-def _intersect(out, r, c, models, owners, counts, touched, n_touched, total):
-    """out[owner, r, c] = best over the owner's histograms of Σ min(model, counts / total)."""
+def _intersect(out, r, c, by_bin, owners, counts, touched, n_touched, total, sums):
+    """out[owner, r, c] = best over the owner's histograms of Σ min(model, counts / total).
+
+    ``by_bin`` is the models bin-major (K·K × T): one pass over the patch's touched bins serves
+    every histogram (each bin's count read once, the models' values for it contiguous); each
+    histogram's sum runs over the bins in the same order as a pass per histogram would.
+    """
     inverse = 1.0 / total
-    for v in range(models.shape[0]):
-        score = 0.0
-        for t in range(n_touched):
-            index = touched[t]
-            score += min(models[v, index], counts[index] * inverse)
+    sums[:] = 0.0
+    for t in range(n_touched):
+        index = touched[t]
+        share = counts[index] * inverse
+        for v in range(by_bin.shape[1]):
+            sums[v] += min(by_bin[index, v], share)
+    for v in range(by_bin.shape[1]):
         owner = owners[v]
-        out[owner, r, c] = max(out[owner, r, c], min(score, 1.0))
+        out[owner, r, c] = max(out[owner, r, c], min(sums[v], 1.0))
 
 
 @numba.njit(cache=True, nogil=True)
@@ -266,6 +273,8 @@ def patch_scores(
     n_labels = int(np.sqrt(n_bins) + 0.5)
     scratch = np.zeros(n_bins, dtype=np.int64)
     touched = np.empty(n_bins, dtype=np.int64)
+    by_bin = np.ascontiguousarray(models.T)
+    sums = np.zeros(models.shape[0], dtype=np.float64)
     out = np.zeros((n_objects, row_bounds.shape[0], col_bounds.shape[0]), dtype=np.float32)
     for r in range(row_bounds.shape[0]):
         for c in range(col_bounds.shape[0]):
@@ -281,7 +290,7 @@ def patch_scores(
                 touched,
             )
             if total > 0:
-                _intersect(out, r, c, models, owners, scratch, touched, n_touched, total)
+                _intersect(out, r, c, by_bin, owners, scratch, touched, n_touched, total, sums)
             for t in range(n_touched):
                 scratch[touched[t]] = 0
     return out
@@ -398,6 +407,8 @@ def cell_patch_scores(
     # Phase 2: each patch sums the groups inside it, then intersects with the model.
     patch = np.zeros(n_bins, dtype=np.int64)
     patch_touched = np.empty(n_bins + 1, dtype=np.int64)
+    by_bin = np.ascontiguousarray(models.T)
+    sums = np.zeros(models.shape[0], dtype=np.float64)
     out = np.zeros((n_objects, row_cells.shape[0], col_cells.shape[0]), dtype=np.float32)
     for r in range(row_cells.shape[0]):
         cy0 = row_cells[r]
@@ -417,7 +428,9 @@ def cell_patch_scores(
                                 patch[index] += entry_count[e]
                                 total += entry_count[e]
             if total > 0:
-                _intersect(out, r, c, models, owners, patch, patch_touched, count_touched, total)
+                _intersect(
+                    out, r, c, by_bin, owners, patch, patch_touched, count_touched, total, sums
+                )
             for t in range(count_touched):
                 patch[patch_touched[t]] = 0
     return out
