@@ -543,16 +543,17 @@ def scene_xml(rng: np.random.Generator) -> str:
           rgba="0.80 0.45 0.25 1"/>
     <geom name="bedroom_rug" class="decor" type="box" pos="6.8 1.9 0.004" size="0.8 0.6 0.002"
           rgba="0.70 0.55 0.40 1"/>
-    <!-- no top exactly at the laser's 0.30 m: a grazing return would fall between map cells -->
+    <!-- no top or bottom at the laser's 0.30 m: a grazing return, seen by the laser but not in
+         the map (or between its cells), throws the localizer off -->
     <body name="bed" pos="8.925 2.0 0" childclass="furniture">
-      <geom name="bed_frame" pos="0 0 0.145" size="1.025 0.8 0.145" material="oak"/>
-      <geom name="bed_mattress" pos="-0.02 0 0.4" size="1.0 0.78 0.1" material="linen"/>
+      <geom name="bed_frame" pos="0 0 0.17" size="1.025 0.8 0.17" material="oak"/>
+      <geom name="bed_mattress" pos="-0.02 0 0.43" size="1.0 0.78 0.09" material="linen"/>
       <geom name="bed_headboard" pos="0.975 0 0.55" size="0.05 0.8 0.55" material="wood_dark"/>
-      <geom name="bed_blanket" class="decor" type="box" pos="-0.3 0 0.51" size="0.72 0.8 0.015"
+      <geom name="bed_blanket" class="decor" type="box" pos="-0.3 0 0.53" size="0.72 0.8 0.015"
             material="blanket"/>
-      <geom name="bed_pillow_a" class="decor" type="box" pos="0.72 0.35 0.56" size="0.15 0.3 0.06"
+      <geom name="bed_pillow_a" class="decor" type="box" pos="0.72 0.35 0.58" size="0.15 0.3 0.06"
             material="linen"/>
-      <geom name="bed_pillow_b" class="decor" type="box" pos="0.72 -0.35 0.56"
+      <geom name="bed_pillow_b" class="decor" type="box" pos="0.72 -0.35 0.58"
             size="0.15 0.3 0.06" material="linen"/>
     </body>
     <body name="nightstand" pos="9.72 3.05 0" childclass="furniture">
