@@ -8,7 +8,9 @@ codebook (``Detector.train``, what a user writes) and on own codebooks per objec
 (descriptor, labelling, pairs + intersection) for each. Prints figures, asserts nothing.
 
 Timings are medians over ``--repeats`` runs after a warm-up, on a 2-core machine shared with
-other jobs: read them as upper bounds.
+other jobs: read them as upper bounds. Also shown: the fastest run (the cost when the core was
+free) and the median CPU time of the calling thread (time spent computing, not waiting for the
+core; OpenCV's blur may add a little on a second thread).
 
     .venv/bin/python benchmarks/bench_rfch_heldout.py [--repeats 60]
 """
@@ -72,13 +74,19 @@ def held_out_pair() -> tuple[np.ndarray, dict[str, np.ndarray], np.ndarray]:
 
 
 def median_ms(function, repeats: int) -> float:
+    return timings_ms(function, repeats)[0]
+
+
+def timings_ms(function, repeats: int) -> tuple[float, float, float]:
+    """(median wall, fastest wall, median thread CPU) milliseconds per call."""
     function()
-    times = []
+    wall, cpu = [], []
     for _ in range(repeats):
-        start = time.perf_counter()
+        start, start_cpu = time.perf_counter(), time.thread_time()
         function()
-        times.append(time.perf_counter() - start)
-    return 1000.0 * statistics.median(times)
+        wall.append(time.perf_counter() - start)
+        cpu.append(time.thread_time() - start_cpu)
+    return 1000 * statistics.median(wall), 1000 * min(wall), 1000 * statistics.median(cpu)
 
 
 def stage_ms(detector: Detector, frame: np.ndarray, repeats: int) -> dict[str, float]:
@@ -106,8 +114,8 @@ def main() -> None:
         f"patches); medians of {args.repeats} runs (2-core machine shared with other jobs)\n"
     )
     header = (
-        f"{'objects':>8s}{'codebook':>10s}{'total':>8s}{'descr':>8s}{'label':>8s}"
-        f"{'pairs+∩':>9s}{'labelled':>10s}{'extra/obj':>11s}"
+        f"{'objects':>8s}{'codebook':>10s}{'total':>8s}{'fastest':>8s}{'cpu':>7s}{'descr':>7s}"
+        f"{'label':>7s}{'pairs+∩':>9s}{'labelled':>10s}{'extra/obj':>11s}"
     )
     print(header)
     first: dict[str, float] = {}
@@ -117,7 +125,7 @@ def main() -> None:
         for kind, detector in (("shared", shared), ("own", Detector([own[n] for n in chosen]))):
             if count == 1 and kind == "own":
                 continue  # one object alone: its own codebook is the shared one
-            total = median_ms(lambda d=detector: d.scores(test_frame), args.repeats)
+            total, fastest, cpu = timings_ms(lambda d=detector: d.scores(test_frame), args.repeats)
             stages = stage_ms(detector, test_frame, args.repeats)
             model = detector.models[0]
             desc = raw_descriptors(test_frame, model.params, model.params.sample_step)
@@ -125,9 +133,9 @@ def main() -> None:
             first.setdefault(kind, first.get("shared", total))
             extra = "" if count == 1 else f"{(total - first[kind]) / (count - 1) / first[kind]:.0%}"
             print(
-                f"{count:8d}{kind:>10s}{total:8.2f}{stages['descriptor']:8.2f}"
-                f"{stages['labelling']:8.2f}{stages['pairs+intersection']:9.2f}"
-                f"{labelled:10.0%}{extra:>11s}"
+                f"{count:8d}{kind:>10s}{total:8.2f}{fastest:8.2f}{cpu:7.2f}"
+                f"{stages['descriptor']:7.2f}{stages['labelling']:7.2f}"
+                f"{stages['pairs+intersection']:9.2f}{labelled:10.0%}{extra:>11s}"
             )
     tank_alone = Detector([own["tank"]])
     tank_in_eight = Detector.train({n: ([train_frame], [masks[n]]) for n in names})
