@@ -12,7 +12,9 @@ import pytest
 from twin.core.errors import InputError
 from twin.sim.placement import (
     HEAD_MARGIN,
+    SUPPORT_KINDS,
     place_on_surface,
+    place_targets,
     random_surface_pose,
     visible_fraction,
 )
@@ -161,3 +163,33 @@ def test_a_shelf_spot_fits_under_the_next_shelf(world: World) -> None:
     with pytest.raises(InputError, match="no surface"):  # a book stands there on shelf 1
         place_on_surface(world, BOX, 2.4, 0.15, math.pi / 2, level=0.41)
     assert world.body_position(BOX) == pytest.approx(before)  # a refused spot moves nothing
+
+
+def test_a_box_on_a_shelf_above_the_camera_is_seen_without_its_bottom() -> None:
+    """The face an object stands on is covered by its support: from a 1.0 m camera below a
+    1.23 m shelf, the game box's bottom faces the camera but cannot count against it."""
+    world = World("apartment")
+    x, y, _ = world.body_position("game_box")
+    assert visible_fraction(world, "game_box", (x, y - 2.0, 1.0)) >= 0.9
+
+
+# per scene: the targets to place at once and their kinds (the apartment's are its own)
+SEVERAL = {
+    "living_room": {"rice_box": ("table", "counter", "shelf")},
+    "apartment": None,
+}
+
+
+@pytest.mark.parametrize("scene", sorted(SEVERAL))
+def test_place_targets_puts_each_on_its_kind_and_a_seed_repeats(scene: str) -> None:
+    world = World(scene)
+    supports = SEVERAL[scene] or world.target_supports()
+    first = place_targets(world, np.random.default_rng(11), SEVERAL[scene])
+    for name, kinds in supports.items():
+        geom = mujoco.mj_name2id(world.model, mujoco.mjtObj.mjOBJ_GEOM, name)
+        bottom = world.body_position(name)[2] - world.model.geom_size[geom][2]
+        assert any(SUPPORT_KINDS[k][0] - 0.003 <= bottom <= SUPPORT_KINDS[k][1] for k in kinds), (
+            name,
+            bottom,
+        )
+    assert place_targets(world, np.random.default_rng(11), SEVERAL[scene]) == first
