@@ -326,10 +326,10 @@ def cell_patch_scores(
     n_rel = (rc + 1) * side
     ny = (h + cell - 1) // cell
     nx = (w + cell - 1) // cell
-    # Phase 1: every pair once, into per-group sparse lists (CSR over groups). Branch-light:
-    # background partners count into a sentinel label n_labels (dropped when a cell's groups
-    # are written out), and a new bin is recorded by always writing its slot and advancing the
-    # list only if it was empty — both branches were unpredictable on a cluttered frame.
+    # Phase 1: every pair once, into per-group sparse lists (CSR over groups). Partners are
+    # walked over each row's list of labelled samples only (background costs nothing, and there
+    # is no branch on it), and a new bin is recorded by always writing its slot and advancing
+    # the list only if it was empty (that branch was unpredictable on a cluttered frame).
     n_labelled = 0
     for y in range(h):
         for x in range(w):
@@ -342,15 +342,30 @@ def cell_patch_scores(
     group_start = np.zeros(ny * nx * n_rel + 1, dtype=np.int64)
     entry_bin = np.empty(capacity, dtype=np.int32)
     entry_count = np.empty(capacity, dtype=np.int32)
-    side_k = n_labels + 1  # labels plus the sentinel
-    n_slots = side_k * side_k
-    marked = np.empty((h, w), dtype=np.int32)
+    n_slots = n_bins
+    # Per row, the labelled samples in order (column, label, slot offset of the column's cell),
+    # and for each column the index of the first labelled sample at or after it.
+    row_start = np.zeros(h + 1, dtype=np.int64)
     for y in range(h):
+        count = 0
         for x in range(w):
-            marked[y, x] = labels[y, x] if labels[y, x] >= 0 else n_labels
-    cell_slot = np.empty(w, dtype=np.int64)
-    for x in range(w):
-        cell_slot[x] = (x // cell) * n_slots
+            if labels[y, x] >= 0:
+                count += 1
+        row_start[y + 1] = row_start[y] + count
+    lab_x = np.empty(max(row_start[h], 1), dtype=np.int64)
+    lab_v = np.empty(max(row_start[h], 1), dtype=np.int64)
+    lab_cell = np.empty(max(row_start[h], 1), dtype=np.int64)
+    next_at = np.empty((h, w + 1), dtype=np.int64)
+    for y in range(h):
+        k = row_start[y]
+        for x in range(w):
+            next_at[y, x] = k
+            if labels[y, x] >= 0:
+                lab_x[k] = x
+                lab_v[k] = labels[y, x]
+                lab_cell[k] = (x // cell) * n_slots
+                k += 1
+        next_at[y, w] = k
     scratch = np.zeros(n_rel * n_slots, dtype=np.int32)
     touched = np.empty(n_rel * n_slots + 1, dtype=np.int64)
     per_group = np.zeros(n_rel + 1, dtype=np.int64)
@@ -360,10 +375,10 @@ def cell_patch_scores(
         for cx in range(nx):
             n_touched = 0
             for y in range(cy * cell, min((cy + 1) * cell, h)):
-                for x in range(cx * cell, min((cx + 1) * cell, w)):
-                    a = labels[y, x]
-                    if a < 0:
-                        continue
+                x_end = min((cx + 1) * cell, w)
+                for i in range(next_at[y, cx * cell], next_at[y, x_end]):
+                    x = lab_x[i]
+                    a = lab_v[i]
                     for dy in range(reach + 1):
                         yy = y + dy
                         if yy >= h:
@@ -372,19 +387,17 @@ def cell_patch_scores(
                         half = widths[dy]
                         lo = x + 1 if dy == 0 else max(0, x - half)
                         hi = min(w, x + half + 1)
-                        for xx in range(lo, hi):
-                            b = marked[yy, xx]
+                        for j in range(next_at[yy, lo], next_at[yy, hi]):
+                            b = lab_v[j]
                             small = min(a, b)
-                            slot = row_slot + cell_slot[xx] + small * side_k + (a + b - small)
+                            slot = row_slot + lab_cell[j] + small * n_labels + (a + b - small)
                             touched[n_touched] = slot
                             n_touched += scratch[slot] == 0
                             scratch[slot] += 1
             # Write the cell's groups out in group order (a counting sort of the touched slots).
             per_group[:] = 0
             for t in range(n_touched):
-                slot = touched[t]
-                if slot % side_k < n_labels:  # not a pair with the sentinel
-                    per_group[slot // n_slots + 1] += 1
+                per_group[touched[t] // n_slots + 1] += 1
             first_group = (cy * nx + cx) * n_rel
             for rel in range(n_rel):
                 per_group[rel + 1] += per_group[rel]  # now: where each group's entries start
@@ -393,13 +406,9 @@ def cell_patch_scores(
             for t in range(n_touched):
                 slot = touched[t]
                 rel = slot // n_slots
-                index = slot - rel * n_slots
-                i = index // side_k
-                j = index - i * side_k
-                if j < n_labels:
-                    entry_bin[fill[rel]] = i * n_labels + j
-                    entry_count[fill[rel]] = scratch[slot]
-                    fill[rel] += 1
+                entry_bin[fill[rel]] = slot - rel * n_slots
+                entry_count[fill[rel]] = scratch[slot]
+                fill[rel] += 1
                 scratch[slot] = 0
             position += per_group[n_rel]
     group_start[ny * nx * n_rel] = position
