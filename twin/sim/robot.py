@@ -521,6 +521,8 @@ class SimCamera(_SimDevice, Camera):
         self.seed = seed
         self._rng = np.random.default_rng(seed)
         self._last_grab: float | None = None
+        self._clock = robot.world.time  # the world's time at the last physics step seen
+        self._reset_seen = False
         fovy = float(robot.world.model.cam_fovy[robot.camera_id])
         lens_renders = effects is not None and effects.settings.lens is not None
         if not lens_renders and abs(fovy - math.degrees(model.vfov)) > 0.01:
@@ -545,13 +547,25 @@ class SimCamera(_SimDevice, Camera):
                 else (self._model.width, self._model.height)
             )
             self._renderer = FrameRenderer(self.robot.world.model, width, height, CAMERA_NAME)
+        if self.effects is not None and self._watch not in self.robot.listeners:
+            self.robot.listeners.append(self._watch)
         self._connected = True
 
     def close(self) -> None:
         if self._renderer is not None:
             self._renderer.close()
             self._renderer = None
+        if self._watch in self.robot.listeners:
+            self.robot.listeners.remove(self._watch)
         self._connected = False
+
+    def _watch(self, robot: SimRobot) -> None:
+        """After every physics step: a clock that ran back means the world was reset (a batch
+        or an environment reuses it), and the camera restarts as at power-on."""
+        now = robot.world.time
+        if now < self._clock:
+            self._reset_seen = True
+        self._clock = now
 
     def restart(self, seed: int | None = None) -> None:
         """As after power-on in a world that was reset: the noise restarts from ``seed`` (the
@@ -563,6 +577,7 @@ class SimCamera(_SimDevice, Camera):
                 self.seed = seed
             self._rng = np.random.default_rng(self.seed)
             self._last_grab = None
+            self._reset_seen = False
             if self.effects is not None:
                 self.effects.reset()
 
@@ -583,7 +598,7 @@ class SimCamera(_SimDevice, Camera):
                 image = self._renderer.render(data)
                 depth = self._renderer.depth(data) if self.depth else None
                 return Frame(image, now, depth)
-            if self._last_grab is not None and now < self._last_grab:
+            if self._reset_seen or (self._last_grab is not None and now < self._last_grab):
                 self.restart()  # the world's clock ran back: it was reset, as at power-on
             image, depth = self._render_canvas(data)
             dt = None if self._last_grab is None else now - self._last_grab
