@@ -12,7 +12,13 @@ column AUC / best-column hit rate; see docs/rfch.md):
   one object well inside 10 ms per 320×240 frame.
 - ``views`` "merged": on the two-view objects merged, per-view and separate models are within
   noise of each other (150 frames each: 0.959 / 0.958 / 0.964 and 0.910 / 0.913 / 0.911 AUC),
-  and merged is the cheapest with the best hit rate.
+  and merged is the cheapest with the best hit rate. On rendered head-camera frames of the
+  training stage's four objects (``benchmarks/rfch_rendered.py --views-table``) "clustered"
+  lowers the column AUC (rice box 0.923 → 0.876, the others by 0–0.005) without finding the
+  object's column more often.
+- ``view_similarity`` 0.35, ``max_view_models`` 4 ("clustered"): views 45 degrees apart at one
+  range match each other at 0.32-0.50 (median per object), so views at least as alike share a
+  model (``twin.rfch.views``).
 - ``patch_size`` 32, ``stride`` 16: a 320×240 frame gets 19 columns × 14 rows that tile it.
 """
 
