@@ -32,8 +32,10 @@ DEFAULT_DISTANCES = (1.0, 1.5, 2.0, 3.0)
 DEFAULT_ANGLES = tuple(2.0 * math.pi * k / 8 for k in range(8))
 # Camera heights over the target's centre (m) that a robot with its camera at 1.0 m sees objects
 # from: on the floor (seen from above), on a 0.45 m coffee table (the one-drop default), on a
-# 0.9 m counter (nearly level) and on a 1.5 m shelf (from below).
-ELEVATION_DROPS = (0.9, 0.4, 0.0, -0.5)
+# 0.9 m counter (level), and on a shelf above the camera (from below). The stage has a floor
+# 0.07-0.15 m under each object's centre, so the view from below is taken from just above that
+# floor (-0.05 m: 1-3 degrees up; the top face is hidden, as a shelf's edge hides its bottom).
+ELEVATION_DROPS = (0.9, 0.4, 0.0, -0.05)
 # Placement i of calibration uses np.random.default_rng(CALIBRATION_SEED + i) (by default):
 # seeds 900_000 to 900_999 are reserved for calibration, and evaluation runs (random target
 # placements in twin.app.run / batch) must use other seeds, or the detector would be scored on
