@@ -159,3 +159,21 @@ def test_train_shared_and_reuse_a_codebook(data: Path, tmp_path: Path, capsys) -
     bad = ["train-shared", "--object", "nameless", "--out-dir", str(out)]
     assert main(bad) == 2
     assert "NAME=IMAGES" in capsys.readouterr().err
+
+
+def test_train_clustered_views_on_a_shared_codebook(data: Path, tmp_path: Path, capsys) -> None:
+    """View parameters from the command line, also for an object added to a codebook."""
+    out = tmp_path / "models"
+    args = ["train-shared", "--object", f"rings={data / 'train'}:{data / 'train_masks'}"]
+    assert main([*args, "--out-dir", str(out), "--views", "clustered", *SMALL]) == 0
+    rings = RFCH.load(out / "rings.npz")
+    assert rings.params.views == "clustered" and len(rings.summary["view_models"]) == 2
+    late = tmp_path / "late.npz"
+    args = ["train", "--name", "late", "--images", str(data / "cutouts"), "--out", str(late)]
+    args += ["--codebook", str(out / "rings.npz"), "--views", "clustered"]
+    assert main([*args, "--view-similarity", "0.9", "--max-view-models", "1"]) == 0
+    late_model = RFCH.load(late)
+    assert late_model.codebook_key == rings.codebook_key and len(late_model.histograms) == 1
+    assert main([*args, "--view-similarity", "2"]) != 0
+    err = capsys.readouterr().err
+    assert "view_similarity must be in [0, 1]" in err and err.count("\n") == 1
