@@ -38,9 +38,11 @@ class RFCH:
     scale (training mean, and colour weight / training std). ``centres`` (K×D) live in that
     space, ``radius`` (K) is α × each cluster's mean training distance (floored), and
     ``histograms`` (V×K×K) are normalized upper-triangular pair histograms: one per training
-    view (``params.views == "per_view"``) or a single merged one. ``calibration`` (optional)
-    is the measured LLR of this model's column scores (``twin.rfch.calibration``), saved in the
-    model file; files written before it existed load with none.
+    view (``params.views == "per_view"``), one per cluster of similar views ("clustered";
+    ``summary["view_models"]`` says which view went where) or a single merged one.
+    ``calibration`` (optional) is the measured LLR of this model's column scores
+    (``twin.rfch.calibration``), saved in the model file; files written before it existed load
+    with none.
     """
 
     name: str
