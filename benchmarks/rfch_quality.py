@@ -257,6 +257,7 @@ VARIANTS = {
     "alpha-2.5": rfch_variant(alpha=2.5),
     "sample-step-1": rfch_variant(sample_step=1),
     "per-view-histograms": rfch_variant(views="per_view"),
+    "clustered-views": rfch_variant(views="clustered"),
     "separate-models": separate_models(),
     "shared-codebook": shared_codebook(),
     "shared-codebook-160": shared_codebook(n_clusters=160),
