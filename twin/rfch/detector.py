@@ -2,9 +2,10 @@
 
 Shared per frame: the input checks, the descriptor pass (Gaussian blurs, derivatives,
 chromaticity — once per distinct descriptor setting, normally once), its sampling, and the patch
-bounds. Per object: labelling against its own codebook, pair counting and intersection — and both
-of those only do real work on samples that the object's rejection radius accepts, so an object
-whose colours are rare in the frame costs little. Labels are NOT taken from a merged codebook:
+bounds. Per codebook: labelling and pair counting (only samples its rejection radii accept do
+real work); per object: one intersection per patch. Objects trained on one codebook
+(``Detector.train``, ``Detector.add``, ``RFCH.train_shared``) share labelling and pair counting;
+models trained one by one each keep their own. The Detector never merges codebooks on its own:
 that would make one object's scores depend on which other objects are loaded.
 """
 
