@@ -92,6 +92,7 @@ def test_detect_with_two_models_draws_both(data: Path, tmp_path: Path, capsys) -
     assert main([*args, str(data / "frames" / "f0.jpg"), "--out", str(out_png)]) == 0
     printed = capsys.readouterr().out
     assert "a: best column" in printed and "b: best column" in printed
+    assert "2 codebooks" in printed and "twin train-shared" in printed  # seeds differ: 2 of them
 
 
 def test_train_from_alpha_cutouts(data: Path, tmp_path: Path) -> None:
@@ -155,6 +156,10 @@ def test_train_shared_and_reuse_a_codebook(data: Path, tmp_path: Path, capsys) -
     assert RFCH.load(late).codebook_key == rings.codebook_key
     assert main([*args, "--codebook", str(out / "rings.npz"), "--out", str(late), "--alpha", "2"])
     assert "only views, view_similarity, max_view_models" in capsys.readouterr().err
+    image = str(data / "frames" / "f0.jpg")
+    args = ["detect", "--model", str(out / "rings.npz"), "--model", str(late), image]
+    assert main([*args, "--out", str(tmp_path / "shared.png")]) == 0
+    assert "codebooks" not in capsys.readouterr().out  # one codebook: nothing to advise
 
     bad = ["train-shared", "--object", "nameless", "--out-dir", str(out)]
     assert main(bad) == 2

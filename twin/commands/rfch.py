@@ -308,6 +308,12 @@ def _detect(args: argparse.Namespace) -> int:
             f"{name}: best column {best} (px {spans[best, 0]:.0f}–{spans[best, 1]:.0f}), "
             f"score {profile[best]:.3f}"
         )
+    if detector.n_codebooks > 1:
+        print(
+            f"note: these {len(detector.models)} models use {detector.n_codebooks} codebooks, so "
+            "each frame is labelled once per codebook; 'twin train-shared' (or 'twin train "
+            "--codebook') puts them on one and each extra object then costs a few %"
+        )
     _draw_detection(args.out, image, detector, scores)
     print(f"wrote {args.out}")
     return 0
