@@ -127,10 +127,14 @@ def test_draws_depend_on_seed_run_and_factor_only(tiny):
     assert draw_mission(lighting_only, 3).lighting == draw_mission(spec, 3).lighting
     assert draw_mission(lighting_only, 3).threshold == 0.0
     assert not draw_mission(lighting_only, 3).place_target
+    assert draw_mission(lighting_only, 3).camera_seed is None  # the config's camera seed
+    cameras = {draw_mission(spec, run).camera_seed for run in range(5)}
+    assert len(cameras) == 5 and None not in cameras
 
 
 def test_lighting_scales_the_rendered_image(tiny):
-    spec = spec_for(tiny, 0, vary=("lighting",))
+    # the ideal camera: the realistic one's auto exposure makes up for the light, as it should
+    spec = spec_for((*tiny, "robot.camera.effects=ideal"), 0, vary=("lighting",))
     world = MissionWorld(spec)
     try:
         means = []

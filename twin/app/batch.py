@@ -42,11 +42,12 @@ from typing import Any
 import numpy as np
 
 from twin.app.executors import Executor, kept_in_worker
+from twin.app.planner_names import BATCH_FACTORS
 from twin.core.devices import DeviceError
 from twin.core.errors import InputError
 from twin.core.store import JsonLinesJournal, json_safe
 
-VARY = ("target", "lighting", "threshold")
+VARY = BATCH_FACTORS
 _FACTOR_KEY = {name: k for k, name in enumerate(VARY)}
 DEFAULT_LIGHTING = (0.5, 1.5)  # scale of the scene's light intensities
 # RFCH patch scores below this read 0. The rendered-frame ROC puts the best cut near 0.16
@@ -159,6 +160,7 @@ class MissionDraw:
     lighting: float
     threshold: float
     place_target: bool
+    camera_seed: int | None = None  # the camera's noise seed; None: the config's
 
 
 def factor_rng(seed: int, run: int, factor: str) -> np.random.Generator:
@@ -173,7 +175,10 @@ def draw_mission(spec: BatchSpec, run: int) -> MissionDraw:
         lighting = float(factor_rng(spec.seed, run, "lighting").uniform(*spec.lighting))
     if "threshold" in spec.vary:
         threshold = float(factor_rng(spec.seed, run, "threshold").uniform(*spec.threshold))
-    return MissionDraw(run, lighting, threshold, "target" in spec.vary)
+    camera_seed = None
+    if "camera" in spec.vary:
+        camera_seed = int(factor_rng(spec.seed, run, "camera").integers(2**31))
+    return MissionDraw(run, lighting, threshold, "target" in spec.vary, camera_seed)
 
 
 class ThresholdedDetector:
@@ -228,6 +233,7 @@ class MissionWorld:
         )
         self.rooms = room_logs(config.objects, config.detector, config.cache, str(config.scene))
         self.robot.connect()
+        self.camera_seed = getattr(self.robot.camera, "seed", 0)  # the config's, for every run
         from twin.app.visibility_models import build_visibility
 
         occupancy = getattr(self.robot.base, "map", None)
@@ -237,25 +243,30 @@ class MissionWorld:
 
     def reset(self, spec: BatchSpec, draw: MissionDraw) -> dict[str, str]:
         """Put the world in run ``draw``'s state; returns the furniture each target stands on."""
-        from twin.sim.placement import random_surface_pose
+        from twin.app.run import place_bodies_randomly
 
         world = self.sim.world
         world.reset()
         world.scale_lighting(draw.lighting)
         if draw.place_target:
             rng = factor_rng(spec.seed, draw.run, "target")
-            for body in self.targets.values():
-                random_surface_pose(world, body, rng)
+            place_bodies_randomly(world, list(self.targets.values()), rng)
         self.sim.place(self.start)
-        self._restart_devices()
+        self._restart_devices(draw)
         return {name: world.support_of(body) for name, body in self.targets.items()}
 
-    def _restart_devices(self) -> None:
-        """Devices that keep state of their own start afresh, as in a new world: the laser's
-        noise, and a localized base's filter (around the mission's start)."""
+    def _restart_devices(self, draw: MissionDraw) -> None:
+        """Devices that keep state of their own start afresh, as in a new world: the camera's
+        noise, exposure and white balance (from the run's own seed when the batch varies the
+        camera, else the config's), the laser's noise, and a localized base's filter (around
+        the mission's start)."""
         from twin.app.localization import LaserLocalizedBase
         from twin.sim.laser import SimLaser
+        from twin.sim.robot import SimCamera
 
+        if isinstance(self.robot.camera, SimCamera):
+            seed = self.camera_seed if draw.camera_seed is None else draw.camera_seed
+            self.robot.camera.restart(seed)
         if isinstance(self.robot.laser, SimLaser):
             self.robot.laser.restart()
         if isinstance(self.robot.base, LaserLocalizedBase):
@@ -328,6 +339,7 @@ def run_batch_mission(spec: BatchSpec, run: int) -> dict[str, Any]:
         "run": run,
         "lighting": draw.lighting,
         "threshold": draw.threshold,
+        "camera_seed": draw.camera_seed,
         "objects": json_safe(result["objects"]),
         "views": result["views"],
         "time_s": result["robot_time_s"],

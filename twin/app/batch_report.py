@@ -171,8 +171,9 @@ def write_summary(
     summary = summarize(spec, results, wall_s)
     paths.append(write_text_atomic(out / "summary.json", json.dumps(summary, indent=1)))
     paths.append(_error_histogram(out / "errors.png", rows, spec.tolerance))
+    # (the camera's noise seed has no order to plot success against)
     factors = {"target": "surface", "lighting": "lighting", "threshold": "threshold"}
-    for factor in spec.vary:
+    for factor in (f for f in spec.vary if f in factors):
         paths.append(_success_vs(out / f"success_vs_{factor}.png", rows, factors[factor]))
     return summary, paths
 

@@ -496,12 +496,23 @@ def _search_results(
 
 
 def _place_target_randomly(config: SurveyConfig, context, seed: int) -> None:
-    from twin.sim.placement import random_surface_pose
+    bodies = [obj.body for obj in config.objects if obj.body is not None]
+    place_bodies_randomly(context.sim.world, bodies, np.random.default_rng(seed))
 
-    rng = np.random.default_rng(seed)
-    for obj in config.objects:
-        if obj.body is not None:
-            random_surface_pose(context.sim.world, obj.body, rng)
+
+def place_bodies_randomly(world, bodies: list[str], rng: np.random.Generator) -> None:
+    """Put the sought ``bodies`` at random fair spots (sim only). A scene that says which kinds
+    of support each target stands on (the apartment's ``twin_target_supports``) places them all
+    at once, each on its own kind, apart and in view (``place_targets``); otherwise each goes to
+    a random level furniture top in turn (``random_surface_pose``)."""
+    from twin.sim.placement import place_targets, random_surface_pose
+
+    kinds = world.target_supports()
+    if bodies and all(body in kinds for body in bodies):
+        place_targets(world, rng, {body: kinds[body] for body in bodies})
+        return
+    for body in bodies:
+        random_surface_pose(world, body, rng)
 
 
 def _truth(config: SurveyConfig, sim) -> dict[str, tuple[float, float, float]]:

@@ -11,7 +11,7 @@ import sys
 import time
 from pathlib import Path
 
-from twin.app.planner_names import PLANNERS
+from twin.app.planner_names import BATCH_FACTORS, PLANNERS
 from twin.commands._args import add_config_arguments, comma_list, numbers
 from twin.commands.montecarlo import add_executor_arguments
 
@@ -21,18 +21,20 @@ DEFAULT_OUT = Path("runs/batch")
 def register(subparsers: argparse._SubParsersAction) -> None:
     parser = subparsers.add_parser(
         "batch-survey",
-        help="run many randomized survey missions (target, lighting, threshold) into a summary",
+        help="run many randomized survey missions (target, lighting, threshold, camera) into a "
+        "summary",
         description="Fly the survey mission --runs times in the twin, each run seeded from "
-        "(--seed, run index), varying the target's place on the furniture tops, the scene's "
-        "light intensities and the detector's threshold; write DIR/runs.jsonl as runs finish, "
+        "(--seed, run index), varying the targets' places on the furniture, the scene's "
+        "light intensities, the detector's threshold and the camera's noise; write "
+        "DIR/runs.jsonl as runs finish, "
         "then DIR/summary.csv, DIR/summary.json, DIR/errors.png and DIR/success_vs_*.png. "
         "No Rerun recording is made.",
     )
     parser.add_argument("--runs", type=int, default=20, help="missions (20)")
     parser.add_argument("--seed", type=int, default=0, help="batch seed (0)")
     parser.add_argument(
-        "--vary", type=comma_list(str, "factors"), default=("target", "lighting", "threshold"),
-        help="factors to randomize: target,lighting,threshold (default: all three)",
+        "--vary", type=comma_list(str, "factors"), default=BATCH_FACTORS,
+        help=f"factors to randomize: {','.join(BATCH_FACTORS)} (default: all)",
     )  # fmt: skip
     parser.add_argument(
         "--lighting", type=numbers(2, "LOW,HIGH light scales"), default=(0.5, 1.5),
