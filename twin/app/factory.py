@@ -115,13 +115,20 @@ def sim_camera(device: DeviceConfig, context: BuildContext) -> Device:
     return SimCamera(context.sim, model, effects=effects, seed=o.effects_seed)
 
 
-def sim_camera_parts(options: Any, sim: SimRobot) -> tuple[CameraModel, Any]:
+def sim_camera_parts(options: Any, sim: SimRobot | None) -> tuple[CameraModel, Any]:
     """The sim camera's ``CameraModel`` (what the mission computes wedges with) and its
     ``twin.sim.camera_effects.CameraEffects`` (None for ``effects = "ideal"``), from its
     ``SimCameraOptions``. Public so that frames rendered elsewhere (a detector's calibration
-    views) can go through the same camera."""
+    views) can go through the same camera. ``sim`` gives an ideal camera's field (the MJCF
+    camera's); without it, the Peoplebot model's (the paper's 45 degrees at 4:3)."""
     o = options
     if o.effects == "ideal":
+        if sim is None:
+            from twin.sim.robot import PAPER_CAMERA
+
+            fovy = PAPER_CAMERA.vfov
+            hfov = 2.0 * math.atan(math.tan(fovy / 2.0) * o.width / o.height)
+            return CameraModel(o.width, o.height, hfov), None
         return _sim_camera_model(sim, o.width, o.height), None
     from twin.sim.camera_effects import CameraEffects, EffectSettings, lens_for_field
 
