@@ -115,7 +115,7 @@ def main() -> None:
     args = parser.parse_args()
 
     from twin.app.config import load_config, resolve_config
-    from twin.app.detection import prepare_detector, room_logs
+    from twin.app.detection import mission_detector
     from twin.app.room import room_baselines
     from twin.app.view_log import ViewLog
     from twin.core.confidence import (
@@ -134,13 +134,11 @@ def main() -> None:
 
     config = load_config(folders[0] / "config.toml", base_dir=Path.cwd(),
                          folder=resolve_config(args.config).parent)  # fmt: skip
-    detector = prepare_detector(config.objects, config.detector, config.cache, lambda _: None,
-                                calibration_scene=str(config.scene))  # fmt: skip
+    detector, rooms = mission_detector(config, lambda _: None)
     name = config.objects[0].name
     spec, sep = config.grid.spec, config.grid.peak_separation
     temperature = args.temperature or config.confidence.temperature
     table = variants(detector)
-    rooms = room_logs(config.objects, config.detector, config.cache, str(config.scene))
 
     baselines: dict[str, dict | None] = {}  # per variant, measured once
 

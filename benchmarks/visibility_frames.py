@@ -29,7 +29,7 @@ def main() -> None:
     args = parser.parse_args()
 
     from twin.app.config import load_config
-    from twin.app.detection import prepare_detector, room_logs
+    from twin.app.detection import mission_detector
     from twin.app.run import make_grids
     from twin.app.view_log import ViewLog
     from twin.core.fusion import make_rule
@@ -38,10 +38,8 @@ def main() -> None:
     # The run's own config for the scene and detector; the rule and its direction bins are the
     # shipped default's (the runs may have been flown under another), or --rule without bins.
     config = load_config(args.run / "config.toml")
-    detector = prepare_detector(config.objects, config.detector, config.cache, lambda _: None,
-                                calibration_scene=str(config.scene))  # fmt: skip
+    detector, rooms = mission_detector(config, lambda _: None)
     name = config.objects[0].name
-    rooms = room_logs(config.objects, config.detector, config.cache, str(config.scene))
     grid, _ = make_grids(load_config(None), detector, rooms)
     rule = grid.rules if args.rule is None else make_rule(args.rule)
     bins = grid.direction_bins if args.rule is None else 1

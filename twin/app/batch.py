@@ -215,7 +215,7 @@ class MissionWorld:
     """One worker's MuJoCo world, connected robot and trained detector, reused between runs."""
 
     def __init__(self, spec: BatchSpec) -> None:
-        from twin.app.detection import prepare_detector, room_logs
+        from twin.app.detection import mission_detector
         from twin.app.factory import build_robot
 
         self.config = config = spec.load()
@@ -223,15 +223,8 @@ class MissionWorld:
         self.sim = context.sim
         self.start = context.start
         self.targets = {o.name: o.body for o in config.objects if o.body is not None}
-        quiet = lambda _: None  # noqa: E731 - the detector is trained before workers start
-        self.detector = prepare_detector(
-            config.objects,
-            config.detector,
-            config.cache,
-            quiet,
-            calibration_scene=str(config.scene),
-        )
-        self.rooms = room_logs(config.objects, config.detector, config.cache, str(config.scene))
+        # quiet: the detector is trained before workers start
+        self.detector, self.rooms = mission_detector(config, lambda _: None)
         self.robot.connect()
         self.camera_seed = getattr(self.robot.camera, "seed", 0)  # the config's, for every run
         from twin.app.visibility_models import build_visibility
@@ -381,12 +374,9 @@ class BatchJournal:
 def prepare(spec: BatchSpec, say: Callable[[str], None] = print) -> None:
     """Train (or load) the detector once here, before workers start, so local workers find it
     cached instead of each training it."""
-    from twin.app.detection import prepare_detector
+    from twin.app.detection import mission_detector
 
-    config = spec.load()
-    prepare_detector(
-        config.objects, config.detector, config.cache, say, calibration_scene=str(config.scene)
-    )
+    mission_detector(spec.load(), say)
 
 
 def run_batch(

@@ -161,6 +161,39 @@ def _calibrated_path(model_path: Path, scene: str | None, effects: Any = None) -
     return model_path.with_name(f"{model_path.stem}_cal{key}.npz")
 
 
+def mission_detector(config: Any, say: Callable[[str], None] = print) -> tuple[Any, dict[str, Any]]:
+    """The detector a mission config asks for, calibrated on its scene through its camera, and
+    the room logs measured with it (``prepare_detector`` and ``room_logs`` as every mission,
+    batch and benchmark uses them)."""
+    effects = calibration_camera(config)
+    detector = prepare_detector(
+        config.objects,
+        config.detector,
+        config.cache,
+        say,
+        calibration_scene=str(config.scene),
+        calibration_effects=effects,
+    )
+    rooms = room_logs(config.objects, config.detector, config.cache, str(config.scene), effects)
+    return detector, rooms
+
+
+def calibration_camera(config: Any) -> Any:
+    """The camera a mission's score calibration frames pass through: the twin's camera as the
+    config sets it up (None for an ideal one), so the calibration and the room's look are
+    measured on the frames the mission will see. A real camera's calibration is still measured
+    in the twin, through the twin's default model of the VC-C4: the closest stand-in it has."""
+    from twin.app.device_types import SimCameraOptions
+    from twin.app.factory import sim_camera_parts
+
+    camera = config.devices["camera"]
+    options = camera.options if camera.type == "sim" else SimCameraOptions()
+    if options.effects == "ideal":
+        return None
+    # The sim robot is only needed for an ideal camera's field of view, ruled out above.
+    return sim_camera_parts(options, None)[1]
+
+
 def calibration_key(model_key: str, scene: str | None, effects: Any = None) -> str:
     """What a calibration depends on beyond its model, hashed: the scene, the recipe, the
     calibration format, the reserved seed and the camera effects if any (``effects_tag``; clean

@@ -231,7 +231,7 @@ def _fly(config, robot, context, run, resume, started, quiet, on_result) -> dict
     """The run proper, once the devices (and any serial twins) exist."""
     from tqdm import tqdm
 
-    from twin.app.detection import prepare_detector, room_logs
+    from twin.app.detection import mission_detector
 
     out, options = run.folder, run.options
     setup_started = time.perf_counter()
@@ -241,10 +241,7 @@ def _fly(config, robot, context, run, resume, started, quiet, on_result) -> dict
     world = sim.world if sim is not None else _scene_world(config)
     scene = _scene_info(config, world, truth)
     say = (lambda _: None) if quiet else print
-    detector = prepare_detector(
-        config.objects, config.detector, config.cache, say, calibration_scene=str(config.scene)
-    )
-    rooms = room_logs(config.objects, config.detector, config.cache, str(config.scene))
+    detector, rooms = mission_detector(config, say)
     grid, belief = make_grids(config, detector, rooms)
     checkpoint = Checkpoint(out)
     state, views = MissionState(), None
