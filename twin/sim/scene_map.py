@@ -315,17 +315,19 @@ FLAT = 0.05  # m: furniture no taller than this (a rug) is driven over
 
 
 def drive_map(world: World, occupancy: OccupancyMap) -> OccupancyMap:
-    """``occupancy`` (the laser's map) with every piece of furniture's whole floor outline
-    marked occupied: what the robot must plan its drives around.
+    """``occupancy`` (the laser's map) with every piece of furniture's and every target's whole
+    floor outline marked occupied: what the robot must plan its drives around.
 
     The laser sees a table's legs at its height, not the top that overhangs them at 0.7 m, and
     the robot's 1.2 m column would hit that top; so the planner keeps clear of each furniture
-    body's convex outline over all its geoms (``World.footprint``), whatever their height. The
-    localizer keeps the laser's own map."""
+    body's convex outline over all its geoms (``World.footprint``), whatever their height. A
+    target standing on the floor lower than the laser's plane (a toy crate in the hall) is
+    as much in the way, and invisible to the laser too. The localizer keeps the laser's own
+    map."""
     cells = np.array(occupancy.occupancy, dtype=float, copy=True)
     blocked = np.zeros(occupancy.shape, dtype=bool)
     x0, y0 = occupancy.origin[0], occupancy.origin[1]
-    for name in world.furniture():
+    for name in (*world.furniture(), *world.targets()):
         outline = world.footprint(name)
         if outline.top > FLAT:
             _rasterise(outline.polygon, blocked, x0, y0, occupancy.resolution)
