@@ -323,3 +323,26 @@ def test_visibility_from_map_depth_hides_what_the_laser_map_blocks() -> None:
     profiles = _profiles(depth, _levels(0.0, 0.45, 1.2))
     assert np.all(profiles[CENTRE, _bins(1.2, 1.9)] == 1.0)  # the 1.2 m shelf, wholly
     assert np.all(profiles[CENTRE, _bins(2.3, 8.0)] == 0.0)  # a 2 m wall hides every level
+
+
+@pytest.mark.parametrize("lensed", [False, True])
+def test_points_are_looked_up_where_the_lens_puts_them(lensed):
+    """The depth lookup projects a point where the camera's own model says it lands: through a
+    distorting lens (the twin's VC-C4) as through the ideal pinhole, and never a point from
+    outside the field folded back in by the distortion polynomial."""
+    from twin.core.visibility import project, projection_of
+    from twin.sim.camera_effects import vcc4_lens
+
+    camera = CameraModel.with_lens(320, 240, vcc4_lens()) if lensed else CameraModel()
+    table = projection_of(camera)
+    rng = np.random.default_rng(4)
+    for _ in range(200):
+        u, v = rng.uniform(0, 320), rng.uniform(0, 240)
+        bearing, elevation = camera.pixel_rays(np.array(u), np.array(v))
+        ahead = math.cos(float(elevation)) * math.cos(float(bearing))
+        left = math.cos(float(elevation)) * math.sin(float(bearing))
+        up = math.sin(float(elevation))
+        col, row = project(-left / ahead, -up / ahead, table)
+        assert (col, row) == pytest.approx((u, v), abs=1e-6)
+    # a ray 80 degrees off the axis is outside a 47.5-degree field, whatever the polynomial says
+    assert project(math.tan(math.radians(80)), 0.0, table) == (-1.0, -1.0)

@@ -206,7 +206,7 @@ def visibility_from_depth(
         camera_height,
         math.cos(tilt),
         math.sin(tilt),
-        camera.focal_px,
+        projection_of(camera),
         np.ascontiguousarray(depth, dtype=np.float32),
         tolerance,
         seen,
@@ -214,9 +214,46 @@ def visibility_from_depth(
     return ColumnVisibility(seen / samples, step)
 
 
+def projection_of(camera: CameraModel) -> np.ndarray:
+    """The camera's projection for the kernel: fx, fy, cx, cy (pixels, from the frame's edges),
+    k1, k2, p1, p2, k3 (OpenCV's distortion), and the largest |x| and |y| of an undistorted ray
+    that lands in the frame (normalized units; beyond them a distorting polynomial may fold a
+    point from outside the field back into the frame)."""
+    lens = camera.lens
+    if lens is None:
+        f = camera.focal_px
+        half_w, half_h = camera.width / 2.0, camera.height / 2.0
+        return np.array([f, f, half_w, half_h, 0, 0, 0, 0, 0, half_w / f, half_h / f], float)
+    u = np.concatenate([np.linspace(0, camera.width, 65), np.full(49, 0.0)])
+    v = np.concatenate([np.full(65, 0.0), np.linspace(0, camera.height, 49)])
+    corners_u = np.concatenate([u, camera.width - u])
+    corners_v = np.concatenate([v, camera.height - v])
+    x, y = camera.normalized(corners_u, corners_v)
+    return np.array(
+        [lens.fx, lens.fy, lens.cx + 0.5, lens.cy + 0.5, lens.k1, lens.k2, lens.p1, lens.p2,
+         lens.k3, 1.01 * np.abs(x).max(), 1.01 * np.abs(y).max()],
+        float,
+    )  # fmt: skip
+
+
+@njit(cache=True)
+def project(x: float, y: float, projection: np.ndarray) -> tuple[float, float]:
+    """Pixel position (from the frame's edges) of the undistorted normalized point (x right,
+    y down) through ``projection_of``'s camera; (-1, -1), outside every frame, for a point beyond
+    the field, which a distorting polynomial could otherwise fold back into it."""
+    fx, fy, cx, cy, k1, k2, p1, p2, k3, x_max, y_max = projection
+    if abs(x) > x_max or abs(y) > y_max:
+        return -1.0, -1.0
+    r2 = x * x + y * y
+    radial = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
+    col = cx + fx * (x * radial + 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x))
+    row = cy + fy * (y * radial + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y)
+    return col, row
+
+
 @njit(cache=True)
 def _count_seen(
-    levels, cos_b, sin_b, r, lifts, camera_height, cos_t, sin_t, focal, depth, tolerance, seen
+    levels, cos_b, sin_b, r, lifts, camera_height, cos_t, sin_t, projection, depth, tolerance, seen
 ):
     """Adds to ``seen[c, b]``, for each of column c's sampled pixel columns, the share of an
     object at distance bin b that would be seen from it (the rule in the module docstring). A
@@ -225,7 +262,6 @@ def _count_seen(
     1-1.6 ms as this loop; benchmarks/bench_visibility.py)."""
     n, n_samples, n_bins, n_levels = levels.shape
     height, width = depth.shape
-    cx, cy = width / 2.0, height / 2.0
     for c in range(n):
         for s in range(n_samples):
             for b in range(n_bins):
@@ -242,8 +278,10 @@ def _count_seen(
                         ahead = ahead_level * cos_t + dz * sin_t
                         if ahead <= 0.0:
                             continue
-                        col = cx - focal * left / ahead
-                        row = cy - focal * (dz * cos_t - ahead_level * sin_t) / ahead
+                        # normalized, right and down positive
+                        col, row = project(
+                            -left / ahead, -(dz * cos_t - ahead_level * sin_t) / ahead, projection
+                        )
                         if not (0.0 <= col < width and 0.0 <= row < height):
                             continue
                         surface = depth[int(row), int(col)]

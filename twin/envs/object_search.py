@@ -420,8 +420,8 @@ class ObjectSearchEnv(gymnasium.Env):
         return obs
 
     def _info(self) -> dict[str, Any]:
-        """Per object the estimate and error (m, against the twin's truth; None before the
-        first view), confidence, P(absent) and verdict; the views taken, steps (views and
+        """Per object the estimate [x, y, z] and its errors in the plan and in height (m, against
+        the twin's truth; None before the first view), confidence, P(absent) and verdict; the views taken, steps (views and
         invalid actions), robot time (s), path length between views (m), the last action and
         why it was invalid, why the episode stopped, the action mask, the places the base
         refused to reach (``unreachable``) and the draw (see the module docstring). Fresh
@@ -429,8 +429,8 @@ class ObjectSearchEnv(gymnasium.Env):
         mission, search = self.mission, self._searcher
         details = mission.confidence_details()
         states = verdicts(mission, self._searcher.rule)
-        truth = {name: xyz[:2] for name, xyz in self._truth.items()}
-        found = estimates(mission.grid, truth, self.config.grid.peak_separation)
+        truth = self._truth
+        found = estimates(mission.grid, truth, self.config.grid.peak_separation, mission.views)
         objects: dict[str, dict[str, Any]] = {}
         for name in self.objects:
             seen = mission.views_done > 0
@@ -438,6 +438,7 @@ class ObjectSearchEnv(gymnasium.Env):
             objects[name] = {
                 "estimate_m": list(found[name]["estimate_m"]) if seen else None,
                 "error_m": found[name].get("error_m") if seen else None,
+                "height_error_m": found[name].get("height_error_m") if seen else None,
                 "truth_m": [round(v, 4) for v in truth[name]] if name in truth else None,
                 "surface": self._surfaces.get(name),
                 "confidence": confidence,
