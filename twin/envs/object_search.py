@@ -420,12 +420,12 @@ class ObjectSearchEnv(gymnasium.Env):
         return obs
 
     def _info(self) -> dict[str, Any]:
-        """Per object the estimate [x, y, z] and its errors in the plan and in height (m, against
-        the twin's truth; None before the first view), confidence, P(absent) and verdict; the views taken, steps (views and
-        invalid actions), robot time (s), path length between views (m), the last action and
-        why it was invalid, why the episode stopped, the action mask, the places the base
-        refused to reach (``unreachable``) and the draw (see the module docstring). Fresh
-        objects every call: a caller may keep them."""
+        """Per object the estimate [x, y, z] and its errors in the plan and in height (m,
+        against the twin's truth; None before the first view), confidence, P(absent) and
+        verdict; the views taken, steps (views and invalid actions), robot time (s), path
+        length between views (m), the last action and why it was invalid, why the episode
+        stopped, the action mask, the places the base refused to reach (``unreachable``) and
+        the draw (see the module docstring). Fresh objects every call: a caller may keep them."""
         mission, search = self.mission, self._searcher
         details = mission.confidence_details()
         states = verdicts(mission, self._searcher.rule)
