@@ -494,15 +494,13 @@ def test_the_run_logs_its_views_and_they_fuse_again_into_its_grid(reduced_run):
 
 def test_the_result_says_how_sure_it_is_from_the_calibrated_belief(reduced_run):
     from twin.app.config import load_config
-    from twin.app.detection import prepare_detector, room_logs
+    from twin.app.detection import mission_detector
     from twin.app.run import make_grids
     from twin.core.confidence import confidence_within, posterior
 
     box = read_result(reduced_run)["objects"]["rice_box"]
     config = load_config(reduced_run / "config.toml")
-    detector = prepare_detector(config.objects, config.detector, config.cache, lambda _: None,
-                                calibration_scene=str(config.scene))  # fmt: skip
-    rooms = room_logs(config.objects, config.detector, config.cache, str(config.scene))
+    detector, rooms = mission_detector(config, lambda _: None)  # cached by the run: no retraining
     assert set(rooms) == {"rice_box"}  # the twin measured the room's look with the calibration
     _, belief = make_grids(config, detector, rooms)
     assert belief.rule.name == "calibrated" and set(belief.baselines) == {"rice_box"}

@@ -94,6 +94,23 @@ def prepare_detector(
     ``twin.sim.training.calibration_views``), so the calibration sees the frames the survey
     sees; part of the calibration's cache key (``effects_tag``). None: clean frames.
     """
+    detector, _ = _prepared(objects, params, cache, say, calibration_scene, calibration_effects)
+    return detector
+
+
+def _prepared(
+    objects: Sequence[ObjectConfig],
+    params: dict[str, Any],
+    cache: Path,
+    say: Callable[[str], None],
+    calibration_scene: str | None,
+    calibration_effects: Any,
+) -> tuple[Any, dict[str, Any]]:
+    """``prepare_detector``'s detector and the room logs its calibration measured (or loaded
+    with it), from one computation of the cache keys: keys computed again later could name
+    other files if the scene's assets changed meanwhile, and the mission would silently lose
+    its room baseline."""
+    from twin.app.view_log import ViewLog
     from twin.rfch import RFCH, Detector, RFCHParams
 
     try:
@@ -114,8 +131,10 @@ def prepare_detector(
         if calibration_scene is not None
     }
     ready = all(p.is_file() and room_log_path(p).is_file() for p in calibrated.values())
+    rooms: dict[str, Any] = {}
     if calibration_scene is not None and ready:
         trained = {name: RFCH.load(path) for name, path in calibrated.items()}
+        rooms = {name: ViewLog.load(room_log_path(path)) for name, path in calibrated.items()}
     else:
         if all(path.is_file() for path in paths.values()):
             trained = {name: RFCH.load(path) for name, path in paths.items()}
@@ -132,6 +151,7 @@ def prepare_detector(
                 room.save(room_log_path(calibrated[obj.name]))
                 model.save(calibrated[obj.name])
                 trained[obj.name] = model
+                rooms[obj.name] = room
     models = [
         RFCH.load(obj.model) if obj.model is not None else trained[obj.name] for obj in objects
     ]
@@ -139,7 +159,7 @@ def prepare_detector(
     # The first call loads the compiled kernels (~0.3 s): pay it here, not in the first view.
     probe = np.random.default_rng(0).integers(0, 256, (240, 320, 3), dtype=np.uint8)
     detector.scores(probe)
-    return detector
+    return detector, rooms
 
 
 def effects_tag(effects: Any) -> str | None:
@@ -163,19 +183,9 @@ def _calibrated_path(model_path: Path, scene: str | None, effects: Any = None) -
 
 def mission_detector(config: Any, say: Callable[[str], None] = print) -> tuple[Any, dict[str, Any]]:
     """The detector a mission config asks for, calibrated on its scene through its camera, and
-    the room logs measured with it (``prepare_detector`` and ``room_logs`` as every mission,
-    batch and benchmark uses them)."""
+    the room logs measured with it, as every mission, batch and benchmark uses them."""
     effects = calibration_camera(config)
-    detector = prepare_detector(
-        config.objects,
-        config.detector,
-        config.cache,
-        say,
-        calibration_scene=str(config.scene),
-        calibration_effects=effects,
-    )
-    rooms = room_logs(config.objects, config.detector, config.cache, str(config.scene), effects)
-    return detector, rooms
+    return _prepared(config.objects, config.detector, config.cache, say, str(config.scene), effects)
 
 
 def calibration_camera(config: Any) -> Any:
@@ -219,28 +229,6 @@ def room_log_path(calibrated_model: Path) -> Path:
     """Where the room's look without the object (``twin.app.room``) is kept: beside the
     calibrated model it was measured with."""
     return calibrated_model.with_name(f"{calibrated_model.stem}_room.npz")
-
-
-def room_logs(
-    objects: Sequence[ObjectConfig],
-    params: dict[str, Any],
-    cache: Path,
-    scene: str,
-    calibration_effects: Any = None,
-) -> dict[str, Any]:
-    """The room logs ``prepare_detector(..., calibration_scene=scene, calibration_effects=...)``
-    measured, per object trained from the scene (model files have none)."""
-    from twin.app.view_log import ViewLog
-
-    from_scene = [obj for obj in objects if obj.model is None]
-    group = [obj.name for obj in from_scene]
-    out = {}
-    for obj in from_scene:
-        model_path = cache / f"rfch_{obj.name}_{cache_key(obj, params, group)}.npz"
-        path = _calibrated_path(model_path, scene, calibration_effects)
-        if room_log_path(path).is_file():
-            out[obj.name] = ViewLog.load(room_log_path(path))
-    return out
 
 
 def _calibrate(

@@ -369,7 +369,7 @@ def make_grids(
     log-likelihood ratios, for the confidence: the same grid when that is the rule; None when a
     model has no calibration). ``grid.fusion = "calibrated"`` without one is refused.
 
-    ``rooms`` (``twin.app.detection.room_logs``): the room's look without each object; with
+    ``rooms`` (``twin.app.detection.mission_detector``): the room's look without each object; with
     ``grid.room_baseline`` a grid fused with visibility subtracts what the room gains a cell
     by itself (``twin.app.room``). The baseline is per share of a cell seen, so a blind grid
     (``grid.visibility = false``, or no visibility model) gets none."""
