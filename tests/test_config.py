@@ -1,6 +1,7 @@
 """Configs: typed device options, --set overrides, shipped configs by name, the run's copy."""
 
 import dataclasses
+import math
 import tomllib
 from pathlib import Path
 from typing import Literal
@@ -286,3 +287,22 @@ def test_the_grid_covers_the_scene_unless_told_otherwise(tmp_path):
         load_config(None, overrides=[f'scene.file="{bare}"'])
     message = str(caught.value)
     assert "grid.extent" in message and "floor" in message and "\n" not in message
+
+
+def test_each_stop_may_have_its_own_tilt():
+    """stop_tilts_deg: one tilt per stop (the views of a stop share it); a list of the wrong
+    length, or a tilt out of the head's range, is refused in one line naming the key."""
+    from twin.app.survey import plan_views
+    from twin.core.devices import VCC4_LIMITS
+
+    stops = "mission.stops=[[1.1, 1.2], [2.5, 3.3]]"
+    config = load_config(None, overrides=[stops, "mission.stop_tilts_deg=[-20, 5]"])
+    tilts = {
+        (v.stop, round(math.degrees(v.tilt), 6)) for v in plan_views(config.mission, VCC4_LIMITS)
+    }
+    assert tilts == {(0, -20.0), (1, 5.0)}
+    assert load_config(None, overrides=[stops]).mission.tilt_at(1) == 0.0
+    for bad, key in (("[-20]", "mission.stop_tilts_deg"), ("[-20, -45]", "stop_tilts_deg[1]")):
+        with pytest.raises(ConfigError, match=key.replace("[", r"\[")) as caught:
+            load_config(None, overrides=[stops, f"mission.stop_tilts_deg={bad}"])
+        assert "\n" not in str(caught.value)

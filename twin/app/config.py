@@ -70,6 +70,11 @@ class MissionConfig:
     headings: tuple[float, ...]
     turn: str = "pan"
     tilt: float = 0.0
+    stop_tilts: tuple[float, ...] = ()  # radians, one per stop; empty: every stop at ``tilt``
+
+    def tilt_at(self, stop: int) -> float:
+        """The head's tilt (radians, up positive) for every view of stop ``stop``."""
+        return self.stop_tilts[stop] if self.stop_tilts else self.tilt
 
 
 @dataclass(frozen=True)
@@ -643,10 +648,29 @@ def _mission(table: _Table) -> MissionConfig:
     first = table.number("first_heading_deg", 0.0)
     headings = tuple(math.radians(first + i * step) for i in range(views))
     turn = table.choice("turn", ("pan", "base"), "pan")
-    tilt = table.number("tilt_deg", 0.0, lambda v: -30.0 <= v <= 90.0, "a tilt in [-30, 90]")
+    in_range = (lambda v: -30.0 <= v <= 90.0, "a tilt in [-30, 90] degrees")
+    tilt = table.number("tilt_deg", 0.0, *in_range)
+    stop_tilts: tuple[float, ...] = ()
+    if table.has("stop_tilts_deg"):
+        # An object on the floor near a stop needs the head down, one on a high shelf level.
+        values = table.get("stop_tilts_deg")
+        if not isinstance(values, list) or len(values) != len(stops):
+            raise table.fail(
+                "stop_tilts_deg", f"expected one tilt in degrees per stop ({len(stops)}), got "
+                f"{values!r}"
+            )  # fmt: skip
+        for i, v in enumerate(values):
+            if isinstance(v, bool) or not isinstance(v, int | float) or not in_range[0](v):
+                raise table.fail(f"stop_tilts_deg[{i}]", f"expected {in_range[1]}, got {v!r}")
+        stop_tilts = tuple(math.radians(v) for v in values)
     table.finish()
     return MissionConfig(
-        (start[0], start[1], math.radians(start[2])), stops, headings, turn, math.radians(tilt)
+        (start[0], start[1], math.radians(start[2])),
+        stops,
+        headings,
+        turn,
+        math.radians(tilt),
+        stop_tilts,
     )
 
 

@@ -55,7 +55,9 @@ def plan_views(mission: MissionConfig, limits: PanTiltLimits) -> list[PlannedVie
             for heading in sorted(taken, key=lambda h: wrap_angle(h - base_yaw)):
                 pan = float(wrap_angle(heading - base_yaw))
                 base = Pose2D(x, y, base_yaw)
-                views.append(PlannedView(len(views), stop_index, base, pan, mission.tilt))
+                views.append(
+                    PlannedView(len(views), stop_index, base, pan, mission.tilt_at(stop_index))
+                )
                 remaining.remove(heading)
             yaw = base_yaw
     return views
