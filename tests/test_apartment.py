@@ -245,3 +245,18 @@ def test_the_apartment_script_reproduces_the_committed_files(tmp_path) -> None:
     assert (tmp_path / "scenes" / "apartment.xml").read_text() == (
         scenes_dir() / "apartment.xml"
     ).read_text()
+
+
+def test_a_calibration_placement_keeps_each_object_on_its_own_kind() -> None:
+    """The detector's calibration puts the floor crate on the floor and the shelf box on a
+    shelf, as the missions will find them, not on a random furniture top."""
+    from twin.sim.training import _random_spot
+
+    world = World("apartment")  # its own: the placements move the targets
+    rng = np.random.default_rng(12)
+    for name, kinds in world.target_supports().items():
+        geom = mujoco.mj_name2id(world.model, mujoco.mjtObj.mjOBJ_GEOM, name)
+        for _ in range(2):
+            _random_spot(world, name, rng)
+            bottom = world.body_position(name)[2] - world.model.geom_size[geom][2]
+            assert any(SUPPORT_KINDS[k][0] <= bottom <= SUPPORT_KINDS[k][1] for k in kinds), name

@@ -219,6 +219,8 @@ def calibration_key(model_key: str, scene: str | None, effects: Any = None) -> s
         "format": CALIBRATION_VERSION,
         "seed": CALIBRATION_SEED,
         "ranges": DEFAULT_RANGES,
+        # 2: a target the scene gives kinds of support stands on those (calibration_views)
+        "placement": 2,
     }
     if effects is not None:
         recipe["effects"] = effects_tag(effects)

@@ -23,7 +23,7 @@ import numpy as np
 
 from twin.core.errors import InputError
 from twin.core.geometry import Pose2D
-from twin.sim.placement import random_surface_pose
+from twin.sim.placement import place_targets, random_surface_pose
 from twin.sim.render import FrameRenderer
 from twin.sim.robot import CAMERA_NAME, PAPER_CAMERA, SimRobot
 from twin.sim.world import World
@@ -126,12 +126,13 @@ def calibration_views(
 
     For each placement i (``rng = np.random.default_rng(seed + i)``; keep ``seed`` in the
     reserved range, see ``CALIBRATION_SEED``) the target moves to a random level furniture top
-    (``random_surface_pose``), then the robot stands at ``views_per_placement`` random free
-    floor poses (``ROBOT_CLEARANCE`` m from walls and furniture, at least ``min_distance`` m
-    from the target) with its head level and straight, so the camera is at its 1 m height.
-    A share ``aimed_fraction`` of the views face the target give or take half the field of
-    view (so it lands anywhere across the frame, or is hidden behind furniture); the others
-    face a uniformly random direction and mostly miss it, as most survey views do.
+    (``random_surface_pose``; or to its own kind of support, if the scene declares one), then
+    the robot stands at ``views_per_placement`` random free floor poses (``ROBOT_CLEARANCE`` m
+    from walls and furniture, at least ``min_distance`` m from the target) with its head level
+    and straight, so the camera is at its 1 m height. A share ``aimed_fraction`` of the views
+    face the target give or take half the field of view (so it lands anywhere across the frame,
+    or is hidden behind furniture); the others face a uniformly random direction and mostly
+    miss it, as most survey views do.
 
     Each placement's lights are scaled by a factor drawn uniformly from ``lighting`` (the
     survey's frames will not be lit as the calibration's were).
@@ -176,7 +177,7 @@ def calibration_views(
             # The camera's own randomness (noise) has its own stream, so that the poses and
             # placements are the same with effects as without.
             camera_rng = np.random.default_rng([seed + i, 1])
-            spot = random_surface_pose(world, target, rng)
+            spot = _random_spot(world, target, rng)
             world.scale_lighting(float(rng.uniform(*lighting)))
             for k in range(views_per_placement):
                 x, y = _free_floor_point(world, obstacles, (spot.x, spot.y), min_distance, rng)
@@ -249,6 +250,16 @@ def _through(
         )
     mask = signed < 0.0
     return image, mask, np.where(mask, -signed, signed)
+
+
+def _random_spot(world: World, target: str, rng: np.random.Generator) -> Pose2D:
+    """Where the target goes for one calibration placement: on its own kind of support when
+    the scene declares one (the apartment's floor crate, its shelf box: a random furniture top
+    is where they never stand), else on a random level furniture top."""
+    kinds = world.target_supports().get(target)
+    if kinds:
+        return place_targets(world, rng, {target: kinds})[target]
+    return random_surface_pose(world, target, rng)
 
 
 def _free_floor_point(
