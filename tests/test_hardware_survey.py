@@ -7,6 +7,7 @@ import sys
 import time
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from twin.cli import main
@@ -34,15 +35,17 @@ def survey(config: str, out: Path, sets: list[str]) -> dict:
 def test_the_real_drivers_fly_the_mission_on_the_twins_to_the_same_cell(tmp_path, cache):
     """ARCOS driver + VC-C4 driver (on AUX1) over pseudo-terminals to the emulators, world at
     2x (faster, the 100 ms SIP cycle coarsens the base's control and its odometry slips): the
-    estimate lands within one cell of the pure-sim run of the same mission."""
+    estimate lands in the same cell as the pure-sim run of the same mission or in one next to
+    it (diagonals too: the realistic camera's noise falls on other frames in each run)."""
     twins = survey(
         "living_room_serial_twins",
         tmp_path / "twins",
         reduced(cache, "serial_twins.time_scale=2.0"),
     )
     sim = survey("living_room_survey", tmp_path / "sim", reduced(cache))
-    assert math.dist(twins["estimate_m"][:2], sim["estimate_m"][:2]) <= 0.1 + 1e-9
-    assert twins["error_m"] < 0.2
+    apart = np.subtract(twins["estimate_m"][:2], sim["estimate_m"][:2])
+    assert np.abs(apart).max() <= 0.1 + 1e-9  # cells are 0.1 m
+    assert twins["error_m"] < 0.2 and sim["error_m"] < 0.2
 
 
 def test_serve_hardware_answers_probe_and_the_drivers_commands(tmp_path, capsys):
