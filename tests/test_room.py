@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 
-from twin.app.room import room_baselines, room_log
+from twin.app.room import fill_unseen, room_baselines, room_log
 from twin.core.fusion import make_rule
 from twin.core.geometry import CameraModel
 from twin.core.grid import AccumulatorGrid, GridSpec
@@ -55,7 +55,26 @@ def test_the_room_baseline_marks_the_look_alike_and_leaves_the_object_out():
     bowl = (int(BOWL[1] / 0.1), int(BOWL[0] / 0.1))
     assert baseline[bowl] > 0.3  # the bowl's cell: seen from every side, always scoring high
     assert np.median(baseline[baseline > 0]) < 0.2  # elsewhere the room's usual is low
-    assert baseline[-1, -1] == 0.0  # a corner no view reached has no baseline
+    # A corner no view reached takes the room's usual look, not a free pass.
+    assert 0.0 < baseline[-1, -1] < 0.2
+
+
+def test_a_cell_the_room_never_saw_is_no_hole_for_a_look_alike():
+    baseline = np.full((9, 9), 0.2)
+    baseline[4, 6] = 0.5  # a look-alike's cell, trusted
+    trusted = np.ones((9, 9), bool)
+    trusted[3:6, 3:6] = False  # a 0.3 m patch the room's views missed, next to it
+    trusted[0, 0] = False
+    filled = fill_unseen(np.where(trusted, baseline, 0.0), trusted)
+    assert filled[4, 5] == 0.5  # the look-alike's neighbour takes its value
+    assert filled[4, 3] == 0.2  # the patch's far side, its own neighbours'
+    assert (filled[~trusted] > 0).all()
+    np.testing.assert_array_equal(filled[trusted], baseline[trusted])
+    far = np.zeros((20, 20), bool)
+    far[:2, :2] = True  # a whole region never seen, farther than the fill reaches
+    lone = fill_unseen(np.where(far, 0.3, 0.0), far, cells=3)
+    assert lone[19, 19] == 0.3  # the room's median
+    assert not fill_unseen(np.zeros((3, 3)), np.zeros((3, 3), bool)).any()  # nothing to go on
 
 
 def test_a_look_alike_loses_its_hold_on_the_estimate():
