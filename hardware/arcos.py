@@ -47,6 +47,7 @@ from twin.core.devices import (
     PIONEER_LIMITS,
     Base,
     BaseLimits,
+    BumpedError,
     ConnectionLostError,
     DeviceError,
     DeviceFaultError,
@@ -486,12 +487,16 @@ class ArcosBase(Base):
         if fault is not None:
             with contextlib.suppress(DeviceError):
                 self._write(command(Command.STOP))
-            raise DeviceFaultError(
+            args = (
                 self.name,
                 asked,
                 f"{fault} at odometry {_fmt(self._map_pose_now())}",
                 "clear the obstacle; choose a stop with a free path",
             )
+            front, rear = bool(sip.front_bumpers), bool(sip.rear_bumpers)
+            if front != rear:  # one bank pressed: the obstacle is ahead, or behind
+                raise BumpedError(*args, bearing=0.0 if front else math.pi)
+            raise DeviceFaultError(*args)  # a stall, or both banks: no side to tell
 
     def _settle(self, deadline: float, asked: str) -> Pose2D:
         """Wait until the firmware reports the motion done (a 'stopped' SIP generated after

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from twin.app.localization import LaserLocalizedBase, LocalizerSettings
-from twin.core.devices import Base, DeviceFaultError, Laser, LaserMount
+from twin.core.devices import Base, BumpedError, DeviceFaultError, Laser, LaserMount
 from twin.core.geometry import Pose2D, wrap_angle
 from twin.nav.maps import OccupancyMap
 from twin.nav.raycast import simulate_scan
@@ -181,6 +181,55 @@ def test_a_contact_backs_off_relocalizes_and_replans_once_then_is_an_error():
     wrapped, _ = localized(faults=5)
     with pytest.raises(DeviceFaultError, match="contact with a table leg"):
         wrapped.go_to(GOALS[0])
+
+
+class ToyOnTheFloorBase(MiscalibratedBase):
+    """A base with a toy of ``radius`` at ``toy`` on the floor, below the laser's plane: a
+    straight leg that would pass within the robot's radius of it stops where the bumper meets
+    it and raises ``BumpedError`` with the bumper's side."""
+
+    def __init__(self, start: Pose2D, toy: tuple[float, float], radius: float = 0.15) -> None:
+        super().__init__(start)
+        self.toy, self.toy_radius, self.bumps = toy, radius, 0
+
+    def go_to(self, goal, *, timeout=60.0):
+        here = self.truth
+        dx, dy = goal.x - here.x, goal.y - here.y
+        length = math.hypot(dx, dy)
+        if length > 1e-6:
+            ux, uy = dx / length, dy / length
+            tx, ty = self.toy[0] - here.x, self.toy[1] - here.y
+            along, across = tx * ux + ty * uy, abs(-tx * uy + ty * ux)
+            touch = 0.30 + self.toy_radius
+            if across < touch and 0.0 < along < length + touch:
+                stop = max(0.0, along - math.sqrt(touch**2 - across**2))
+                self._move(Pose2D(0.0, 0.0, float(wrap_angle(math.atan2(dy, dx) - here.yaw))))
+                self._move(Pose2D(stop, 0.0, 0.0))
+                self.bumps += 1
+                at = self.truth
+                bearing = math.atan2(self.toy[1] - at.y, self.toy[0] - at.x) - at.yaw
+                raise BumpedError(self.name, "go to", "front bumper", "back off", bearing)
+        return super().go_to(goal, timeout=timeout)
+
+
+def test_what_the_bumper_felt_is_planned_around():
+    """A toy below the laser's plane on the straight way to the goal: the base bumps it once,
+    backs away, plans around it and arrives; a new mission forgets it."""
+    toy = (2.6, 1.1)
+    base = ToyOnTheFloorBase(START, toy)
+    laser = RoomLaser(base, room())
+    wrapped = LaserLocalizedBase(base, laser, room(), LocalizerSettings(seed=3), START)
+    base.connect()
+    laser.connect()
+    reached = wrapped.go_to(GOALS[0])
+    assert base.bumps == 1
+    assert pose_error(reached, GOALS[0])[0] < 0.05
+    assert pose_error(base.truth, GOALS[0])[0] < 0.08
+    [(x, y, radius)] = wrapped.planner.added
+    assert math.hypot(x - toy[0], y - toy[1]) < 0.15 and radius > 0
+    assert not wrapped.planner.leg_is_clear((1.0, 1.1), (4.0, 1.1))
+    wrapped.restart(START)
+    assert wrapped.planner.added == [] and wrapped.planner.leg_is_clear((1.0, 1.1), (4.0, 1.1))
 
 
 def test_a_global_start_finds_the_robot_without_being_told_where_it_is():

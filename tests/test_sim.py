@@ -17,6 +17,7 @@ import mujoco
 # isort: on
 from twin.cli import main
 from twin.core.devices import (
+    BumpedError,
     DeviceFaultError,
     NotConnectedError,
     OutOfRangeError,
@@ -190,6 +191,8 @@ def test_driving_into_the_coffee_table_is_a_fault_naming_it() -> None:
         base.go_to(Pose2D(1.6, 4.7, math.pi / 2))  # the column meets the table top's edge
     seen = caught.value.seen
     assert "coffee_table" in seen and "contact" in seen
+    assert isinstance(caught.value, BumpedError)
+    assert caught.value.bearing == pytest.approx(0.0)  # the front bumper: the table is ahead
     truth = sim.truth_pose()
     assert f"({truth.x:.2f}, {truth.y:.2f}) m" in seen  # where, in the truth
     assert 4.0 < truth.y < 4.3  # stopped at the table's edge (4.2 m), not under it
@@ -211,8 +214,9 @@ def test_brushing_a_table_leg_is_a_fault_not_a_silent_turn() -> None:
 
 def test_driving_into_a_wall_names_the_wall() -> None:
     sim, robot = make_sim_robot(start=Pose2D(3.8, 3.9, 0.0))
-    with robot.base as base, pytest.raises(DeviceFaultError, match="wall_right"):
+    with robot.base as base, pytest.raises(BumpedError, match="wall_right") as caught:
         base.drive(0.3, 0.0, 5.0)
+    assert caught.value.bearing == pytest.approx(0.0)
     assert sim.truth_pose().x == pytest.approx(4.5 - 0.2, abs=0.01)  # chassis front at the wall
 
 

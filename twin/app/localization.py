@@ -11,8 +11,9 @@ Why legs, and why at rest: the filter is updated with scans taken while the base
 scan's beams are not smeared by motion; between scans the odometry (with its real errors) is
 trusted only for one leg. A leg is driven only if the map and the newest scan both show its
 corridor free (an obstacle the map does not hold stops the leg before it starts); a contact or a
-stall during a leg backs the robot off, re-localizes and re-plans once, then is an error —
-never a view fused from a pose that silently went wrong.
+stall during a leg backs the robot off (away from where its bumper was pressed), re-localizes
+and re-plans once, around what the bumper felt (a toy on the floor lies below the laser's plane),
+then is an error — never a view fused from a pose that silently went wrong.
 """
 
 from __future__ import annotations
@@ -23,7 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from twin.app.record import Localization
-from twin.core.devices import Base, DeviceFaultError, Laser, LaserMount, Scan
+from twin.core.devices import Base, BumpedError, DeviceFaultError, Laser, LaserMount, Scan
 from twin.core.errors import InputError
 from twin.core.geometry import Pose2D, wrap_angle
 from twin.nav.distance import obstacle_distance
@@ -50,6 +51,9 @@ RECENTRE_MIN_YAW = math.radians(1.5)
 # obstacle outlines (mean log-likelihood above -1.1 with the table's sigma)
 MATCH_MIN_MEAN_LOG_LIKELIHOOD = -1.1
 BACK_OFF_M = 0.20  # how far the base backs away after touching something
+# What a bumper felt is planned around as a disc of this radius just beyond the robot's rim:
+# the bumper tells the side, not the size (the apartment's floor crate is 0.4 m x 0.3 m).
+BUMPED_RADIUS_M = 0.15
 # A leg may start this far inside the planning margin (from the nearest cell outside it): a
 # goal at the margin's edge is reached within the base's 5 cm, a leg stopped short by the laser
 # or backed off a touch leaves the robot nearer, and the next leg must still be able to leave;
@@ -154,6 +158,7 @@ class LaserLocalizedBase(Base):
         self._mcl = None
         self._estimate = self._odometry_at_estimate = None
         self._scan = None
+        self.planner.forget_obstacles()
 
     def snapshot(self) -> Localization:
         """What the recorder shows of the localization now: scan, mount, particles."""
@@ -307,11 +312,22 @@ class LaserLocalizedBase(Base):
         odometry_goal = anchor.compose(estimate.pose.relative(target))
         try:
             self.inner.go_to(odometry_goal, timeout=timeout)
-        except DeviceFaultError:
+        except DeviceFaultError as fault:
             if not allow_recovery:
                 raise
-            # touched something (or stalled): back off, find ourselves, and plan again once
-            self.inner.drive(-0.1, 0.0, BACK_OFF_M / 0.1)
+            # touched something (or stalled): remember what the bumper felt, back away from it,
+            # find ourselves, and plan again once, around it
+            bearing = fault.bearing if isinstance(fault, BumpedError) else None
+            if bearing is not None:
+                touched = self.pose()
+                reach = self.settings.robot_radius + BUMPED_RADIUS_M
+                self.planner.add_obstacle(
+                    touched.x + reach * math.cos(touched.yaw + bearing),
+                    touched.y + reach * math.sin(touched.yaw + bearing),
+                    BUMPED_RADIUS_M,
+                )
+            behind = bearing is not None and abs(float(wrap_angle(bearing))) > math.pi / 2
+            self.inner.drive(0.1 if behind else -0.1, 0.0, BACK_OFF_M / 0.1)
             self._settle()
             self._drive_path(self.pose(), target, timeout, first=False)
             return

@@ -65,6 +65,20 @@ class DeviceFaultError(DeviceError):
     """The device reported a fault: motor stall, bumper hit, camera system error."""
 
 
+class BumpedError(DeviceFaultError):
+    """The base touched something: ``bearing`` is where, in radians in the robot's frame (0
+    ahead, counter-clockwise positive), as its bumpers tell it. A base that re-plans needs it:
+    what the bumper felt is an obstacle its map and laser may not hold (a toy on the floor is
+    below the laser's plane), and backing off must move away from it."""
+
+    def __init__(self, device: str, asked: str, seen: str, remedy: str, bearing: float) -> None:
+        super().__init__(device, asked, seen, remedy)
+        self.bearing = float(bearing)
+
+    def __reduce__(self):
+        return (type(self), (self.device, self.asked, self.seen, self.remedy, self.bearing))
+
+
 class ConnectionLostError(DeviceError):
     """The link to the device vanished (port closed, camera unplugged)."""
 

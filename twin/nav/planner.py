@@ -323,6 +323,29 @@ class PathPlanner:
         half = occupancy_map.resolution / 2.0
         #: (ny, nx) bool: cells the robot's centre must not enter
         self.blocked = np.ascontiguousarray(distance - half < self.clearance)
+        self._map_blocked = self.blocked.copy()
+        #: obstacles found since (``add_obstacle``): (x, y, radius) in metres
+        self.added: list[tuple[float, float, float]] = []
+
+    def add_obstacle(self, x: float, y: float, radius: float) -> None:
+        """Plan around a disc of ``radius`` m at (``x``, ``y``) m that the map does not hold
+        (what a bumper felt: a toy on the floor is below the laser's plane), inflated like the
+        map's obstacles; ``forget_obstacles`` drops them all."""
+        if not all(math.isfinite(v) for v in (x, y, radius)) or radius < 0:
+            raise InputError(
+                f"an obstacle needs a finite place and a radius >= 0 m, got {(x, y, radius)}"
+            )
+        rows, cols = np.indices(self.blocked.shape)
+        cx, cy = self.map.center_of(rows, cols)
+        half = self.map.resolution / 2.0
+        near = np.hypot(cx - x, cy - y) - radius - half < self.clearance
+        self.blocked = np.ascontiguousarray(self.blocked | near)
+        self.added.append((float(x), float(y), float(radius)))
+
+    def forget_obstacles(self) -> None:
+        """Back to the map's obstacles only (a new mission in a world that may have changed)."""
+        self.blocked = self._map_blocked.copy()
+        self.added = []
 
     @property
     def clearance(self) -> float:

@@ -26,6 +26,7 @@ from twin.core.devices import (
     PIONEER_LIMITS,
     Base,
     BaseLimits,
+    BumpedError,
     Camera,
     DeviceFaultError,
     DeviceTimeoutError,
@@ -36,7 +37,7 @@ from twin.core.devices import (
     Robot,
 )
 from twin.core.errors import InputError
-from twin.core.geometry import CameraModel, Pose2D
+from twin.core.geometry import CameraModel, Pose2D, wrap_angle
 from twin.sim.camera_effects import CameraEffects
 from twin.sim.drive import (
     DiffDriveGeometry,
@@ -70,6 +71,7 @@ class Contact:
     scene_geom: str
     owner: str
     position: tuple[float, float, float]
+    normal: tuple[float, float, float] = (0.0, 0.0, 0.0)  # unit, from the robot into the scene
 
     def describe(self) -> str:
         x, y, z = self.position
@@ -77,6 +79,21 @@ class Contact:
             f"its {self.robot_geom} touched the {self.owner} ({self.scene_geom}) at "
             f"({x:.2f}, {y:.2f}, {z:.2f}) m"
         )
+
+
+BUMPER_SECTOR = math.radians(30.0)  # a bumper tells the segment it was pressed on, not the point
+
+
+def bumper_bearing(pose: Pose2D, contact: Contact) -> float:
+    """The direction (robot frame, rad) the robot pressed against the scene, as the Peoplebot's
+    segmented bumpers would give it: to the nearest 30 degrees. From the contact's normal, not
+    from the centre to the point: an overhang (a table top) meets the column behind the
+    centre, a wall meets a corner of the chassis, and both push straight back."""
+    nx, ny, _ = contact.normal
+    if math.hypot(nx, ny) < 1e-6:  # pressed from straight above or below: the point's side
+        nx, ny = contact.position[0] - pose.x, contact.position[1] - pose.y
+    bearing = float(wrap_angle(math.atan2(ny, nx) - pose.yaw))
+    return float(wrap_angle(round(bearing / BUMPER_SECTOR) * BUMPER_SECTOR))
 
 
 def _fmt(pose: Pose2D) -> str:
@@ -216,12 +233,15 @@ class SimRobot:
             if side[a] + side[b] != 3:  # robot-floor, scene-scene, robot-robot
                 continue
             robot, other = (a, b) if side[a] == 1 else (b, a)
+            # the contact normal points from geom[0] to geom[1]: make it robot -> scene
+            normal = d.contact.frame[i, :3] * (1.0 if robot == a else -1.0)
             found.append(
                 Contact(
                     m.geom(robot).name or f"geom {robot}",
                     m.geom(other).name or f"geom {other}",
                     self.world.geom_owner(other),
                     tuple(float(v) for v in d.contact.pos[i]),
+                    (float(normal[0]), float(normal[1]), float(normal[2])),
                 )
             )
         return found
@@ -368,9 +388,10 @@ class SimRobot:
         self.advance(0.2)  # let the servos bring the wheels to rest
         return self.odometry_pose()
 
-    def _fault(self, asked: str, seen: str) -> DeviceFaultError:
+    def _fault(self, asked: str, seen: str, bearing: float | None = None) -> DeviceFaultError:
         """Stop the wheels, let the base come to rest (up to 1 s), and build the fault to raise;
-        ``seen`` gets the truth pose at rest appended (a knock can still turn the base)."""
+        ``seen`` gets the truth pose at rest appended (a knock can still turn the base). With a
+        ``bearing`` (robot frame, rad) it is a ``BumpedError``."""
         self.set_wheel_speeds(0.0, 0.0)
         qvel = self.world.data.qvel
         for _ in range(20):
@@ -378,13 +399,16 @@ class SimRobot:
             base = qvel[self._free_qvel : self._free_qvel + 6]
             if np.abs(base[:3]).max() < 1e-3 and np.abs(base[3:]).max() < 1e-2:
                 break
-        return DeviceFaultError(
+        args = (
             "sim base",
             asked,
             f"{seen}; at rest at {_fmt(self.truth_pose())} (truth)",
             "choose a stop with a free straight path to it, and check the pose estimate "
             "(odometry drifts)",
         )
+        if bearing is None:
+            return DeviceFaultError(*args)
+        return BumpedError(*args, bearing=bearing)
 
     def _guard(self, asked: str) -> None:
         """Raise ``DeviceFaultError`` if the robot touches the scene (anything but the floor) or
@@ -397,7 +421,11 @@ class SimRobot:
         touches = self.contacts()
         if touches:
             pose = self.truth_pose()
-            raise self._fault(asked, f"contact: {touches[0].describe()}, truth pose {_fmt(pose)}")
+            raise self._fault(
+                asked,
+                f"contact: {touches[0].describe()}, truth pose {_fmt(pose)}",
+                bumper_bearing(pose, touches[0]),
+            )
         torque = self.world.data.actuator_force[self._wheel_act]
         left, right = self.stall.update(self.world.time, float(torque[0]), float(torque[1]))
         if left or right:
