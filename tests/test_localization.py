@@ -173,7 +173,7 @@ def test_an_obstacle_the_map_does_not_hold_stops_the_leg_before_it_starts():
     assert base.truth.x < 2.4 - 0.3  # it did not drive into it
 
 
-def test_a_contact_backs_off_relocalizes_and_replans_once_then_is_an_error():
+def test_a_contact_backs_off_relocalizes_and_replans_then_is_an_error():
     wrapped, base = localized(faults=1)
     reached = wrapped.go_to(GOALS[0])
     assert base.faults == 0  # it did touch something on the way

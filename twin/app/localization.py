@@ -12,8 +12,9 @@ scan's beams are not smeared by motion; between scans the odometry (with its rea
 trusted only for one leg. A leg is driven only if the map and the newest scan both show its
 corridor free (an obstacle the map does not hold stops the leg before it starts); a contact or a
 stall during a leg backs the robot off (away from where its bumper was pressed), re-localizes
-and re-plans once, around what the bumper felt (a toy on the floor lies below the laser's plane),
-then is an error — never a view fused from a pose that silently went wrong.
+and re-plans around what the bumper felt (a toy on the floor lies below the laser's plane), up
+to ``MAX_RECOVERIES`` times a goal, then is an error — never a view fused from a pose that
+silently went wrong.
 """
 
 from __future__ import annotations
@@ -51,6 +52,10 @@ RECENTRE_MIN_YAW = math.radians(1.5)
 # obstacle outlines (mean log-likelihood above -1.1 with the table's sigma)
 MATCH_MIN_MEAN_LOG_LIKELIHOOD = -1.1
 BACK_OFF_M = 0.20  # how far the base backs away after touching something
+# Touches a go_to recovers from (each backed off, re-localized and planned around) before the
+# next is an error: a bumper tells the side of a toy crate, not its size, so going round it
+# may take a second touch.
+MAX_RECOVERIES = 3
 # What a bumper felt is planned around as a disc of this radius just beyond the robot's rim:
 # the bumper tells the side, not the size (the apartment's floor crate is 0.4 m x 0.3 m).
 BUMPED_RADIUS_M = 0.15
@@ -113,6 +118,7 @@ class LaserLocalizedBase(Base):
         self._estimate: PoseEstimate | None = None
         self._odometry_at_estimate: Pose2D | None = None
         self._scan: Scan | None = None
+        self._recoveries_left = MAX_RECOVERIES
 
     # -- the device ---------------------------------------------------------------------------
 
@@ -176,11 +182,12 @@ class LaserLocalizedBase(Base):
         ends with a scan at rest that re-localizes the base, and the last legs correct what the
         odometry got wrong until the localized pose is within 5 cm and 3 degrees."""
         self.require_connected(f"go to ({goal.x:.2f}, {goal.y:.2f}) m")
-        for attempt in range(3):  # the planned path, then up to two corrections
+        self._recoveries_left = MAX_RECOVERIES
+        for _ in range(3):  # the planned path, then up to two corrections
             here = self.pose()
             if _arrived(here, goal):
                 break
-            self._drive_path(here, goal, timeout, first=attempt == 0)
+            self._drive_path(here, goal, timeout)
         return self.pose()
 
     def drive(self, speed: float, turn_rate: float, duration: float) -> Pose2D:
@@ -267,7 +274,7 @@ class LaserLocalizedBase(Base):
             estimate = self._update()
         return estimate
 
-    def _drive_path(self, here: Pose2D, goal: Pose2D, timeout: float, first: bool) -> None:
+    def _drive_path(self, here: Pose2D, goal: Pose2D, timeout: float) -> None:
         try:
             legs = self._legs(here, goal)
         except (InputError, NoPathError) as exc:
@@ -278,7 +285,7 @@ class LaserLocalizedBase(Base):
                 "choose a stop farther from the furniture, or check the map",
             ) from None
         for target in legs:
-            self._drive_leg(target, timeout, allow_recovery=first)
+            self._drive_leg(target, timeout)
 
     def _legs(self, here: Pose2D, goal: Pose2D) -> list[Pose2D]:
         """The planned waypoints as poses: each faces along its next leg, the last the goal."""
@@ -296,7 +303,7 @@ class LaserLocalizedBase(Base):
                 poses.append(Pose2D(float(x), float(y), goal.yaw))
         return poses
 
-    def _drive_leg(self, target: Pose2D, timeout: float, allow_recovery: bool) -> None:
+    def _drive_leg(self, target: Pose2D, timeout: float) -> None:
         here = self.pose()
         blocked = self._blocked_by_scan(here, target)
         if blocked is not None:
@@ -313,8 +320,9 @@ class LaserLocalizedBase(Base):
         try:
             self.inner.go_to(odometry_goal, timeout=timeout)
         except DeviceFaultError as fault:
-            if not allow_recovery:
+            if self._recoveries_left <= 0:
                 raise
+            self._recoveries_left -= 1
             # touched something (or stalled): remember what the bumper felt, back away from it,
             # find ourselves, and plan again once, around it
             bearing = fault.bearing if isinstance(fault, BumpedError) else None
@@ -329,7 +337,7 @@ class LaserLocalizedBase(Base):
             behind = bearing is not None and abs(float(wrap_angle(bearing))) > math.pi / 2
             self.inner.drive(0.1 if behind else -0.1, 0.0, BACK_OFF_M / 0.1)
             self._settle()
-            self._drive_path(self.pose(), target, timeout, first=False)
+            self._drive_path(self.pose(), target, timeout)
             return
         self._settle()
 
