@@ -8,14 +8,19 @@ import math
 import numpy as np
 import pytest
 
+from twin.app.mission import estimates, locate
 from twin.app.view_log import LoggedView, ViewLog
 from twin.core.errors import InputError
+from twin.core.fusion import make_rule
 from twin.core.geometry import CameraModel
+from twin.core.grid import AccumulatorGrid, GridSpec
 from twin.core.height import (
     best_patch_elevations,
     estimate_height,
+    height_fits,
     weighted_median,
 )
+from twin.core.visibility import SupportLevels
 from twin.rfch.params import PatchGrid
 
 CAMERA = CameraModel()  # 320 x 240, 45 degrees
@@ -162,3 +167,51 @@ def test_the_view_log_keeps_elevations_and_reads_logs_without_them(tmp_path):
         old.append(LoggedView(view.origin, view.wedges, view.values, None, True))
     old.save(tmp_path / "old.npz")
     assert ViewLog.load(tmp_path / "old.npz").height("box", target) is None
+
+
+def test_a_height_fits_between_a_surface_and_an_object_height_above_it():
+    levels = np.array([0.0, 0.45, np.nan])
+    assert height_fits(0.1, levels, 0.2)  # on the floor
+    assert height_fits(0.6, levels, 0.2)  # on the 0.45 m table
+    assert not height_fits(1.3, levels, 0.2)  # in mid-air
+    assert not height_fits(0.3, np.array([np.nan]), 0.2)  # nowhere to stand
+
+
+def _log_of(*objects):
+    """A view log of 12 views round each (target, z, strength)."""
+    log = ViewLog(["box"], None)
+    rng = np.random.default_rng(3)
+    for target, z, strength in objects:
+        origins, wedges, values, elevations = views_of(target, z, rng, liars=0)
+        for i in range(len(origins)):
+            log.append(
+                LoggedView(
+                    tuple(origins[i]), wedges[i], {"box": values[i] * strength}, None, True,
+                    {"box": elevations[i]}, 1.0,
+                )
+            )  # fmt: skip
+    return log
+
+
+def test_a_peak_whose_height_fits_no_surface_there_is_passed_over():
+    """Bearings crossing over bare floor put a look-alike 1.3 m up, where nothing could hold
+    it: the estimate goes to the weaker peak on the table, and the result says why."""
+    spec = GridSpec(0.0, 0.0, 9.0, 7.0, 0.1)
+    log = _log_of(((2.0, 3.0), 1.3, 1.0), ((6.0, 3.0), 0.6, 0.8))
+    grid = AccumulatorGrid(["box"], spec, make_rule("accumulate"), 4)
+    log.fuse_into(grid)
+    levels = np.full((*spec.shape, 2), np.nan)
+    levels[..., 0] = 0.0  # the floor everywhere
+    levels[28:33, 58:63, 1] = 0.45  # a table round (6, 3)
+    supports = SupportLevels(0.0, 0.0, 0.1, levels)
+    plain = locate(grid, "box", 0.5, log)
+    assert math.hypot(plain.peak.x - 2.0, plain.peak.y - 3.0) < 0.25  # the look-alike wins
+    found = locate(grid, "box", 0.5, log, supports, object_height=0.2)
+    assert math.hypot(found.peak.x - 6.0, found.peak.y - 3.0) < 0.25
+    assert found.height is not None and found.height.z == pytest.approx(0.6, abs=0.05)
+    [(passed, z)] = found.passed_over
+    assert (passed.x, passed.y) == (plain.peak.x, plain.peak.y) and z == pytest.approx(1.3, 0.05)
+    entry = estimates(grid, {"box": (6.0, 3.0, 0.6)}, 0.5, log, supports)["box"]
+    assert entry["error_m"] < 0.25 and entry["height_error_m"] < 0.05
+    assert entry["passed_over"][0]["z_m"] == pytest.approx(1.3, abs=0.05)
+    assert entry["peak_ratio"] is None or entry["peak_ratio"] >= 1.0

@@ -14,11 +14,12 @@ import numpy as np
 import pytest
 
 from twin.app.config import MissionConfig, load_config
-from twin.app.mission import Checkpoint, Mission, MissionState, PoseGate
+from twin.app.mission import Checkpoint, Mission, MissionState, NotReachedError, PoseGate
+from twin.app.record import Localization
 from twin.app.survey import plan_views, run_survey
 from twin.app.view_log import ViewLog
 from twin.cli import main
-from twin.core.devices import VCC4_LIMITS, Base, Camera, Frame, PanTilt, Robot
+from twin.core.devices import VCC4_LIMITS, Base, Camera, DeviceFaultError, Frame, PanTilt, Robot
 from twin.core.errors import TwinError
 from twin.core.geometry import CameraModel, Pose2D, wrap_angle
 from twin.core.grid import AccumulatorGrid, GridSpec
@@ -328,6 +329,70 @@ def test_a_view_whose_pose_is_too_uncertain_is_reported_and_not_fused(tmp_path):
     result = resumed.result()
     assert [r["view"] for r in result["views_refused"]] == at_second_stop
     assert result["pose_error"] == {"max_m": 0.1, "mean_m": 0.1, "max_deg": 1.0}
+
+
+class BlockedStopBase(UnsureBase):
+    """A base that cannot reach the second stop (x = 3.0): something stands there that its
+    map does not hold."""
+
+    def __init__(self):
+        super().__init__()
+        self.tries = 0
+
+    def pose_covariance(self):
+        return np.diag([1e-4, 1e-4, 1e-4])
+
+    def go_to(self, goal, *, timeout=60.0):
+        if goal.x == 3.0:
+            self.tries += 1
+            raise DeviceFaultError(self.name, "go to", "no safe path: a crate", "clear it")
+        return super().go_to(goal, timeout=timeout)
+
+
+class LocalizedBlockedStopBase(BlockedStopBase):
+    """The same, localizing (it has a ``snapshot``): it has backed off and found itself."""
+
+    def snapshot(self):
+        return Localization(None, None)
+
+
+def test_a_stop_the_base_cannot_reach_is_skipped_reported_and_the_survey_goes_on(tmp_path):
+    plan = plan_views(MISSION, VCC4_LIMITS)
+    at_second_stop = [v.index for v in plan if v.stop == 1]
+    base, head, said = LocalizedBlockedStopBase(), ExactHead(), []
+    robot = Robot(Clocked(base, head, 0.0), head, base)
+    grid = AccumulatorGrid(["thing"], SPEC)
+    mission = Mission(
+        robot, MeanDetector(), grid, checkpoint=Checkpoint(tmp_path), truth_pose=base.pose,
+        say=said.append,
+    )  # fmt: skip
+    with mission.robot:
+        run_survey(mission, plan)
+    assert base.tries == 1  # one try, then the stop's other views are skipped without driving
+    assert mission.views_done == len(plan)
+    assert mission.grid.views("thing") == len(plan) - len(at_second_stop)
+    refused = mission.result()["views_refused"]
+    assert [r["view"] for r in refused] == at_second_stop
+    assert all(
+        r["reason"].startswith("not reached: exact base: go to: no safe path") for r in refused
+    )
+    assert said == [f"stop 2 not reached, its views skipped: {refused[0]['reason'][13:]}"]
+    # the checkpoint holds it all: a resumed run takes no view twice
+    grid, state = Checkpoint(tmp_path).load(AccumulatorGrid(["thing"], SPEC))
+    assert state.views_done == len(plan) and len(Checkpoint(tmp_path).load_views(state)) == len(
+        plan
+    )
+
+
+def test_an_unreachable_place_still_stops_a_base_that_does_not_localize(tmp_path):
+    """Without a localizer nothing backed the base off what stopped it: the fault ends the run."""
+    plan = plan_views(MISSION, VCC4_LIMITS)
+    base, head = BlockedStopBase(), ExactHead()
+    robot = Robot(Clocked(base, head, 0.0), head, base)
+    mission = Mission(robot, MeanDetector(), AccumulatorGrid(["thing"], SPEC))
+    with mission.robot, pytest.raises(DeviceFaultError, match="no safe path") as caught:
+        run_survey(mission, plan)
+    assert not isinstance(caught.value, NotReachedError)
 
 
 # -- the mission in the twin ------------------------------------------------------------------

@@ -27,15 +27,15 @@ from typing import Any, Protocol, runtime_checkable
 import numpy as np
 
 from twin.app.config import ConfidenceOptions
-from twin.app.record import Localization, NullRecorder, Recorder, ViewRecord
+from twin.app.record import EstimatePoint, Localization, NullRecorder, Recorder, ViewRecord
 from twin.app.view_log import LoggedView, ViewLog
-from twin.core.devices import Robot, View
+from twin.core.devices import DeviceFaultError, Robot, View
 from twin.core.errors import TwinError
 from twin.core.geometry import CameraModel, Pose2D
-from twin.core.grid import AccumulatorGrid
-from twin.core.height import best_patch_elevations
+from twin.core.grid import AccumulatorGrid, Peak, Peaks
+from twin.core.height import HeightEstimate, best_patch_elevations, height_fits
 from twin.core.store import write_text_atomic
-from twin.core.visibility import ColumnVisibility
+from twin.core.visibility import ColumnVisibility, SupportLevels
 
 CHECKPOINT_GRID = "checkpoint/grid.npz"
 CHECKPOINT_STATE = "checkpoint/state.json"
@@ -92,6 +92,12 @@ class ViewTarget(Protocol):
 
     @property
     def tilt(self) -> float: ...
+
+
+class NotReachedError(DeviceFaultError):
+    """A localizing base could not reach a view's place (no safe path, an obstacle in the way,
+    a touch its recovery could not get round); it has stopped, backed off and localized again,
+    so the mission may go on elsewhere."""
 
 
 @dataclass
@@ -287,6 +293,10 @@ class Mission:
         self.pose_gate, self.say = pose_gate, say
         self._names = names
         self.visibility, self.fuse_visibility = visibility, fuse_visibility
+        # Where objects may stand, when the visibility model knows: a peak whose height fits
+        # no surface there is passed over (``locate``).
+        self.supports: SupportLevels | None = getattr(visibility, "supports", None)
+        self.object_height: float = getattr(visibility, "object_height", 0.2)
         self.confidence_options = confidence_options or ConfidenceOptions()
         self.views = views if views is not None else ViewLog(names, max_range)
         if len(self.views) != self.state.views_done:
@@ -317,7 +327,14 @@ class Mission:
         started = time.perf_counter()
         robot, state = self.robot, self.state
         with self._timed("move"):
-            robot.base.go_to(target.base)
+            try:
+                robot.base.go_to(target.base)
+            except DeviceFaultError as fault:
+                if not isinstance(robot.base, LocalizingBase):
+                    raise  # it may still be touching what stopped it: nothing more to do
+                raise NotReachedError(
+                    fault.device, fault.asked, fault.seen, fault.remedy
+                ) from fault
             robot.pantilt.move_to(target.pan, target.tilt)
         with self._timed("capture"):
             view = robot.capture()
@@ -361,6 +378,7 @@ class Mission:
         if truth_pose is not None:
             state.truth_path.append([truth_pose.x, truth_pose.y, truth_pose.yaw])
         state.robot_time = view.timestamp - self._clock_origin
+        located = self.located()
         record = ViewRecord(
             index,
             target.stop,
@@ -378,8 +396,17 @@ class Mission:
             robot.base.snapshot() if isinstance(robot.base, LocalizingBase) else None,
             tuple((x, y, yaw) for x, y, yaw in state.truth_path),
             seen,
-            self.confidences(),
-            self.heights(),
+            {name: c for name, (c, _) in self.confidence_details(located).items()},
+            {
+                name: EstimatePoint(
+                    at.peak.x,
+                    at.peak.y,
+                    None if at.height is None else at.height.z,
+                    at.peak.value,
+                    at.ratio,
+                )
+                for name, at in located.items()
+            },
         )
         with self._timed("record"):
             self.recorder.log_view(record, self.grid)
@@ -393,7 +420,9 @@ class Mission:
     def result(self, peak_separation: float = 0.5) -> dict[str, Any]:
         """Per object the estimate (and, in the sim, the truth and the error), the views fused,
         the robot time and where the time went (seconds)."""
-        objects = estimates(self.grid, self.truth, peak_separation, self.views)
+        objects = estimates(
+            self.grid, self.truth, peak_separation, self.views, self.supports, self.object_height
+        )
         for name, (confidence, p_absent) in self.confidence_details().items():
             objects[name]["confidence"] = round(confidence, 4)
             objects[name]["p_absent"] = round(p_absent, 4)
@@ -409,7 +438,9 @@ class Mission:
             result["pose_error"] = error
         return result
 
-    def confidence_details(self) -> dict[str, tuple[float, float]]:
+    def confidence_details(
+        self, located: dict[str, Located] | None = None
+    ) -> dict[str, tuple[float, float]]:
         """Per object (confidence, p_absent): the posterior probability that it lies within the
         confidence radius of the grid's estimate, and that it is not in the mapped area at all;
         empty without a calibrated belief grid."""
@@ -418,8 +449,9 @@ class Mission:
         if self.belief is None or self.belief.views(self._names[0]) == 0:
             return {}
         options, out = self.confidence_options, {}
+        located = located or self.located()
         for name in self._names:
-            best = self.grid.peaks(name, k=1).best
+            best = located[name].peak
             cells, p_absent = posterior(
                 self.belief.layer(name), options.temperature, options.p_absent
             )
@@ -427,19 +459,46 @@ class Mission:
             out[name] = (float(within), float(p_absent))
         return out
 
-    def heights(self, peak_separation: float = 0.5) -> dict[str, float]:
-        """Per object its height (m) at the grid's best peak, where the views tell it."""
-        out = {}
-        for name in self._names:
-            best = self.grid.peaks(name, k=1, min_separation=peak_separation).best
-            height = self.views.height(name, (best.x, best.y))
-            if height is not None:
-                out[name] = height.z
-        return out
+    def skip(self, target: ViewTarget, reason: str) -> None:
+        """Count ``target`` as a view not taken (its place could not be reached: ``reason``):
+        refused in the results, an unfused entry in the view log, the robot's pose in the path;
+        a fixed plan goes on with its next views, and a resumed run after it."""
+        state, robot = self.state, self.robot
+        index = state.views_done
+        pose = robot.base.pose()
+        camera = robot.camera.model
+        spans = self.detector.column_spans(camera.width)
+        zeros = np.zeros(len(spans))
+        self.views.append(
+            LoggedView(
+                (pose.x, pose.y),
+                camera.wedges(target.base, target.pan, spans, target.tilt),
+                dict.fromkeys(self._names, zeros),
+                None,
+                False,
+                dict.fromkeys(self._names, zeros),
+                self.camera_height,
+            )
+        )
+        state.refused.append({"view": index, "reason": f"not reached: {reason}"})
+        state.views_done += 1
+        state.path.append([pose.x, pose.y, pose.yaw])
+        if self.truth_pose is not None:
+            truth = self.truth_pose()
+            state.truth_path.append([truth.x, truth.y, truth.yaw])
+        if self.checkpoint is not None:
+            with self._timed("checkpoint"):
+                self.checkpoint.save(self.grid, state, self.views)
 
-    def confidences(self) -> dict[str, float]:
-        """Per object the confidence of its estimate (see ``confidence_details``)."""
-        return {name: c for name, (c, _) in self.confidence_details().items()}
+    def located(self, peak_separation: float = 0.5) -> dict[str, Located]:
+        """Where each object is now: the grid's strongest peak whose height fits a surface
+        there (``locate``, with the visibility model's supports when there is one)."""
+        return {
+            name: locate(
+                self.grid, name, peak_separation, self.views, self.supports, self.object_height
+            )
+            for name in self._names
+        }
 
 
 def pose_error(state: MissionState) -> dict[str, float] | None:
@@ -463,32 +522,93 @@ def pose_error(state: MissionState) -> dict[str, float] | None:
     }
 
 
+@dataclass(frozen=True)
+class Located:
+    """Where an object is: the chosen peak of its layer and its height there (None: no view
+    tells it), the layer's strongest peaks, and the stronger ones passed over because their
+    height fits no surface under them (with those heights)."""
+
+    peak: Peak
+    height: HeightEstimate | None
+    peaks: Peaks
+    passed_over: tuple[tuple[Peak, float], ...] = ()
+
+    @property
+    def ratio(self) -> float:
+        """The chosen peak's value over the next peak's (``Peaks.ratio`` for the first)."""
+        later = [p for p in self.peaks.peaks if p.value < self.peak.value]
+        return Peaks((self.peak, *later[:1])).ratio
+
+
+def locate(
+    grid: AccumulatorGrid,
+    name: str,
+    min_separation: float = 0.5,
+    views: ViewLog | None = None,
+    supports: SupportLevels | None = None,
+    object_height: float = 0.2,
+    k: int = 3,
+) -> Located:
+    """The strongest of ``name``'s ``k`` peaks whose height (from ``views``) fits a surface of
+    ``supports`` within a cell of it (``twin.core.height.height_fits``); the strongest peak when
+    none fits, or without views or supports. Bearings from a few stops also cross in front of
+    a look-alike, on bare floor, and the patch rows then put the object in mid-air."""
+    peaks = grid.peaks(name, k=k, min_separation=min_separation)
+
+    def height_at(peak: Peak) -> HeightEstimate | None:
+        return views.height(name, (peak.x, peak.y)) if views is not None else None
+
+    first = height_at(peaks.best)
+    if supports is None or views is None:
+        return Located(peaks.best, first, peaks)
+    offsets = np.array([-1.0, 0.0, 1.0]) * grid.spec.cell_size
+    passed: list[tuple[Peak, float]] = []
+    for index, peak in enumerate(peaks.peaks):
+        height = first if index == 0 else height_at(peak)
+        if height is None:
+            return Located(peak, height, peaks, tuple(passed))
+        x, y = np.meshgrid(peak.x + offsets, peak.y + offsets)
+        if height_fits(height.z, supports.sample(x, y), object_height):
+            return Located(peak, height, peaks, tuple(passed))
+        passed.append((peak, height.z))
+    return Located(peaks.best, first, peaks)
+
+
 def estimates(
     grid: AccumulatorGrid,
     truth: dict[str, tuple[float, ...]] | None = None,
     min_separation: float = 0.5,
     views: ViewLog | None = None,
+    supports: SupportLevels | None = None,
+    object_height: float = 0.2,
 ) -> dict[str, dict[str, Any]]:
-    """Per object: the best peak in metres, its value, the first/second peak ratio, and, when
-    the truth is known (simulation), the truth and the estimate's error in metres.
+    """Per object: the best peak in metres (``locate``: with ``views`` and ``supports``, the
+    strongest whose height fits a surface there), its value, its ratio to the next peak, and,
+    when the truth is known (simulation), the truth and the estimate's error in metres.
 
     With the mission's ``views``, the estimate is [x, y, z]: z is the object's height from the
     rows its best patches were found in (``ViewLog.height``; None when no view with rows looks
     toward the estimate), with ``height_views`` and ``height_spread_m``; a truth with z adds
-    ``height_error_m``. ``error_m`` stays the error in the plan."""
+    ``height_error_m``. ``error_m`` stays the error in the plan. Peaks passed over are listed
+    in ``passed_over`` with the height their views gave."""
     out: dict[str, dict[str, Any]] = {}
     for name in grid.objects:
-        peaks = grid.peaks(name, k=3, min_separation=min_separation)
-        best = peaks.best
+        found = locate(grid, name, min_separation, views, supports, object_height)
+        best, height, ratio = found.peak, found.height, found.ratio
         entry: dict[str, Any] = {
             "estimate_m": [round(best.x, 4), round(best.y, 4)],
             "peak": best.value,
-            "peak_ratio": peaks.ratio if math.isfinite(peaks.ratio) else None,
+            "peak_ratio": ratio if math.isfinite(ratio) else None,
             "peaks": [
-                {"xy_m": [round(p.x, 4), round(p.y, 4)], "value": p.value} for p in peaks.peaks
+                {"xy_m": [round(p.x, 4), round(p.y, 4)], "value": p.value}
+                for p in found.peaks.peaks
             ],
         }
-        height = views.height(name, (best.x, best.y)) if views is not None else None
+        if found.passed_over:
+            entry["passed_over"] = [
+                {"xy_m": [round(p.x, 4), round(p.y, 4)], "value": p.value, "z_m": round(z, 4)}
+                for p, z in found.passed_over
+            ]
         if views is not None:
             entry["estimate_m"].append(None if height is None else round(height.z, 4))
             entry["height_views"] = 0 if height is None else height.views

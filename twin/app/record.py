@@ -96,8 +96,21 @@ class ViewRecord:
     truth_path: tuple[tuple[float, float, float], ...] = ()  # simulation: the true poses so far
     visibility: ColumnVisibility | None = None  # what each column could have seen, if modelled
     confidence: dict[str, float] = field(default_factory=dict)  # object -> P(within radius)
-    # object -> its height (m) at the grid's best peak (twin.core.height); absent: unknown
-    heights: dict[str, float] = field(default_factory=dict)
+    # object -> where the mission places it now (``Mission.located``); absent: the grid's
+    # strongest peak, at an unknown height
+    estimates: dict[str, EstimatePoint] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class EstimatePoint:
+    """An object's estimate as the viewer draws it: plan position and height (m; ``z`` None
+    while no view tells it), the peak's value and its ratio to the next peak."""
+
+    x: float
+    y: float
+    z: float | None
+    value: float
+    ratio: float
 
 
 @dataclass(frozen=True)
@@ -522,7 +535,7 @@ class RerunRecorder:
         for name, values in record.column_values.items():
             self._log_wedges(name, (pose.x, pose.y), record.wedges, values)
         for name in grid.objects:
-            self._log_grid(name, grid, record.heights.get(name))
+            self._log_grid(name, grid, record.estimates.get(name))
         for name, confidence in record.confidence.items():
             log(f"plots/confidence/{name}", rr.Scalars(confidence))
 
@@ -958,7 +971,9 @@ class RerunRecorder:
             rr.Mesh3D(vertex_positions=vertices, vertex_colors=colors, triangle_indices=triangles),
         )
 
-    def _log_grid(self, name: str, grid: AccumulatorGrid, height: float | None = None) -> None:
+    def _log_grid(
+        self, name: str, grid: AccumulatorGrid, estimate: EstimatePoint | None = None
+    ) -> None:
         rr, log = self._rr, self.stream.log
         layer = grid.layer(name)
         scale = self._scales[name]
@@ -989,8 +1004,12 @@ class RerunRecorder:
                 draw_order=0.0,
             ),
         )
-        peaks = grid.peaks(name, k=2, min_separation=self._peak_separation)
-        best = peaks.best
+        if estimate is None:
+            peaks = grid.peaks(name, k=2, min_separation=self._peak_separation)
+            estimate = EstimatePoint(
+                peaks.best.x, peaks.best.y, None, peaks.best.value, peaks.ratio
+            )
+        best, height = estimate, estimate.z
         # In 3-D the estimate stands at its height (twin.core.height), on a stalk from the
         # floor so that its place on the plan reads too; on the floor while it is unknown.
         z = 0.05 if height is None else height
@@ -1022,5 +1041,5 @@ class RerunRecorder:
             ),
         )
         log(f"plots/peak/{name}", rr.Scalars(best.value))
-        if math.isfinite(peaks.ratio):
-            log(f"plots/peak_ratio/{name}", rr.Scalars(peaks.ratio))
+        if math.isfinite(best.ratio):
+            log(f"plots/peak_ratio/{name}", rr.Scalars(best.ratio))

@@ -13,7 +13,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 from twin.app.config import MissionConfig
-from twin.app.mission import Mission
+from twin.app.mission import Mission, NotReachedError
 from twin.core.devices import PanTiltLimits
 from twin.core.errors import TwinError
 from twin.core.geometry import Pose2D, wrap_angle
@@ -91,14 +91,26 @@ def run_survey(
     on_view: Callable[[PlannedView], None] | None = None,
 ) -> None:
     """Observe every view of ``plan`` the mission has not taken yet (all of them, unless it was
-    resumed from a checkpoint); ``on_view`` sees each before it is taken."""
+    resumed from a checkpoint); ``on_view`` sees each before it is taken. A stop whose place
+    the base cannot reach (``NotReachedError``) has its views skipped (``Mission.skip``)."""
     done = mission.views_done
     if done > len(plan):
         raise TwinError(
             f"the run holds {done} views but its plan has {len(plan)}; "
             "resume with the config the run started with"
         )
+    unreachable: dict[int, str] = {}  # stop -> why its place was not reached
     for planned in plan[done:]:
         if on_view:
             on_view(planned)
-        mission.observe(planned)
+        if planned.stop in unreachable:
+            mission.skip(planned, unreachable[planned.stop])
+            continue
+        try:
+            mission.observe(planned)
+        except NotReachedError as exc:
+            # Something stands where the plan wanted the robot (a toy crate left on the floor):
+            # the survey reports the stop's views as not taken and goes on to the next stop.
+            unreachable[planned.stop] = str(exc)
+            mission.say(f"stop {planned.stop + 1} not reached, its views skipped: {exc}")
+            mission.skip(planned, str(exc))

@@ -84,6 +84,17 @@ class HeightEstimate:
     spread: float
 
 
+def height_fits(z: float, levels: np.ndarray, object_height: float, tolerance: float = 0.1) -> bool:
+    """Whether an object whose centre is ``z`` m up could stand on one of ``levels`` (support
+    heights in m, NaN ignored): its centre lies between a surface and ``object_height`` above
+    it, give or take ``tolerance`` (what a height from patch rows is good to). A peak in front
+    of a bookcase whose views put the object 1.3 m above a bare floor is a bearing crossing,
+    not an object; ``levels`` from ``SupportLevels.anywhere`` accept every height."""
+    finite = np.asarray(levels, dtype=float)
+    finite = finite[np.isfinite(finite)]
+    return bool(np.any((finite - tolerance <= z) & (z <= finite + object_height + tolerance)))
+
+
 def weighted_median(values: np.ndarray, weights: np.ndarray) -> float:
     """The value at which the weights' cumulative share first reaches one half."""
     order = np.argsort(values)

@@ -430,7 +430,14 @@ class ObjectSearchEnv(gymnasium.Env):
         details = mission.confidence_details()
         states = verdicts(mission, self._searcher.rule)
         truth = self._truth
-        found = estimates(mission.grid, truth, self.config.grid.peak_separation, mission.views)
+        found = estimates(
+            mission.grid,
+            truth,
+            self.config.grid.peak_separation,
+            mission.views,
+            mission.supports,
+            mission.object_height,
+        )
         objects: dict[str, dict[str, Any]] = {}
         for name in self.objects:
             seen = mission.views_done > 0
