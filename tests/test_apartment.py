@@ -260,3 +260,37 @@ def test_a_calibration_placement_keeps_each_object_on_its_own_kind() -> None:
             _random_spot(world, name, rng)
             bottom = world.body_position(name)[2] - world.model.geom_size[geom][2]
             assert any(SUPPORT_KINDS[k][0] <= bottom <= SUPPORT_KINDS[k][1] for k in kinds), name
+
+
+def test_a_placement_that_cuts_off_a_stop_is_drawn_again(world: World, maps) -> None:
+    """A crate left on a stop (or across the only door) ends a survey before it has seen
+    anything: the batch's placements are judged by ``stops_reachable`` and drawn again."""
+    from twin.app.run import place_bodies_randomly, stops_reachable
+    from twin.core.errors import TwinError
+
+    occupancy, _ = maps
+    config = load_config("apartment")
+    start = tuple(config.mission.start[:2])
+    stops = config.mission.stops
+    crate = world.body_id("toy_crate")
+    saved = world.model.body_pos[crate].copy()
+    judge = stops_reachable(world, occupancy, start, stops, 0.30, 0.05)
+    try:
+        assert judge()  # as the scene ships
+        world.model.body_pos[crate][:2] = stops[1]  # on the second stop
+        world.forward()
+        assert not judge()
+        verdicts = iter([False, False, True])
+        drawn = []
+
+        def third_time_lucky() -> bool:
+            drawn.append(tuple(world.model.body_pos[crate][:2]))
+            return next(verdicts)
+
+        place_bodies_randomly(world, ["toy_crate"], np.random.default_rng(4), third_time_lucky)
+        assert len(drawn) == 3 and len(set(drawn)) == 3  # three different draws
+        with pytest.raises(TwinError, match="left the mission's stops reachable"):
+            place_bodies_randomly(world, ["toy_crate"], np.random.default_rng(4), lambda: False)
+    finally:
+        world.model.body_pos[crate] = saved
+        world.forward()

@@ -243,10 +243,26 @@ class MissionWorld:
         world.scale_lighting(draw.lighting)
         if draw.place_target:
             rng = factor_rng(spec.seed, draw.run, "target")
-            place_bodies_randomly(world, list(self.targets.values()), rng)
+            place_bodies_randomly(world, list(self.targets.values()), rng, self._passable())
         self.sim.place(self.start)
         self._restart_devices(draw)
         return {name: world.support_of(body) for name, body in self.targets.items()}
+
+    def _passable(self) -> Callable[[], bool] | None:
+        """With a base that plans (laser localization), a placement must leave every stop of
+        the mission reachable: a crate across the only door ends a survey before it has seen
+        anything, and says nothing about finding objects."""
+        from twin.app.localization import LaserLocalizedBase
+        from twin.app.run import stops_reachable
+
+        base = self.robot.base
+        if not isinstance(base, LaserLocalizedBase):
+            return None
+        settings = base.settings
+        return stops_reachable(
+            self.sim.world, base.map, (self.start.x, self.start.y), self.config.mission.stops,
+            settings.robot_radius, settings.margin,
+        )  # fmt: skip
 
     def _restart_devices(self, draw: MissionDraw) -> None:
         """Devices that keep state of their own start afresh, as in a new world: the camera's
@@ -335,6 +351,7 @@ def run_batch_mission(spec: BatchSpec, run: int) -> dict[str, Any]:
         "camera_seed": draw.camera_seed,
         "objects": json_safe(result["objects"]),
         "views": result["views"],
+        "views_refused": len(result["views_refused"]),  # not fused: unsure pose, stop not reached
         "time_s": result["robot_time_s"],
         "path_length_m": round(path_length(world.robot.base.planner, mission.state.path), 3),
         **search,

@@ -19,7 +19,7 @@ import math
 import sys
 import time
 import uuid
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import asdict, dataclass, field, replace
 from datetime import datetime
 from pathlib import Path
@@ -497,19 +497,63 @@ def _place_target_randomly(config: SurveyConfig, context, seed: int) -> None:
     place_bodies_randomly(context.sim.world, bodies, np.random.default_rng(seed))
 
 
-def place_bodies_randomly(world, bodies: list[str], rng: np.random.Generator) -> None:
+PASSABLE_DRAWS = 20  # placements drawn before giving up on one that leaves the way free
+
+
+def place_bodies_randomly(
+    world, bodies: list[str], rng: np.random.Generator, passable: Callable[[], bool] | None = None
+) -> None:
     """Put the sought ``bodies`` at random fair spots (sim only). A scene that says which kinds
     of support each target stands on (the apartment's ``twin_target_supports``) places them all
     at once, each on its own kind, apart and in view (``place_targets``); otherwise each goes to
-    a random level furniture top in turn (``random_surface_pose``)."""
+    a random level furniture top in turn (``random_surface_pose``).
+
+    ``passable`` (e.g. ``stops_reachable``) judges a placement: one it refuses (a toy crate
+    across the only way out of a room) is drawn again, up to ``PASSABLE_DRAWS`` times, then a
+    ``TwinError``. A crate near the way stays: the robot must bump it and go round."""
     from twin.sim.placement import place_targets, random_surface_pose
 
     kinds = world.target_supports()
-    if bodies and all(body in kinds for body in bodies):
-        place_targets(world, rng, {body: kinds[body] for body in bodies})
-        return
-    for body in bodies:
-        random_surface_pose(world, body, rng)
+    for _ in range(PASSABLE_DRAWS):
+        if bodies and all(body in kinds for body in bodies):
+            place_targets(world, rng, {body: kinds[body] for body in bodies})
+        else:
+            for body in bodies:
+                random_surface_pose(world, body, rng)
+        if passable is None or passable():
+            return
+    raise TwinError(
+        f"no placement of {', '.join(bodies)} in {PASSABLE_DRAWS} draws left the mission's "
+        "stops reachable; move the stops off the narrow ways, or place the objects by hand"
+    )
+
+
+def stops_reachable(
+    world,
+    occupancy,
+    start: tuple[float, float],
+    stops: Sequence[tuple[float, float]],
+    radius: float,
+    margin: float,
+) -> Callable[[], bool]:
+    """A judge for ``place_bodies_randomly``: whether every stop can be reached from ``start``
+    (metres) by a robot of ``radius`` + ``margin`` planning on ``occupancy`` with the scene's
+    furniture and targets as they stand now (``twin.sim.scene_map.drive_map``)."""
+    from twin.app.localization import START_TOLERANCE
+    from twin.nav.planner import PathPlanner
+    from twin.sim.scene_map import drive_map
+
+    def judge() -> bool:
+        planner = PathPlanner(
+            drive_map(world, occupancy), radius, margin, unknown_is_obstacle=False
+        )
+        far = planner.distances_from(start, START_TOLERANCE)
+        rows, cols = occupancy.cell_of(*np.asarray(stops, dtype=float).T)
+        ny, nx = far.shape
+        inside = (rows >= 0) & (rows < ny) & (cols >= 0) & (cols < nx)
+        return bool(inside.all() and np.isfinite(far[rows, cols]).all())
+
+    return judge
 
 
 def _truth(config: SurveyConfig, sim) -> dict[str, tuple[float, float, float]]:
