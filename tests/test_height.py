@@ -4,23 +4,25 @@ them."""
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
 
 from twin.app.mission import estimates, locate
-from twin.app.view_log import LoggedView, ViewLog
+from twin.app.view_log import LoggedView, ViewLog, fuse_view
 from twin.core.errors import InputError
 from twin.core.fusion import make_rule
 from twin.core.geometry import CameraModel
 from twin.core.grid import AccumulatorGrid, GridSpec
 from twin.core.height import (
+    HeightCheck,
     best_patch_elevations,
     estimate_height,
     height_fits,
     weighted_median,
 )
-from twin.core.visibility import SupportLevels
+from twin.core.visibility import ColumnVisibility, SupportLevels
 from twin.rfch.params import PatchGrid
 
 CAMERA = CameraModel()  # 320 x 240, 45 degrees
@@ -215,3 +217,52 @@ def test_a_peak_whose_height_fits_no_surface_there_is_passed_over():
     assert entry["error_m"] < 0.25 and entry["height_error_m"] < 0.05
     assert entry["passed_over"][0]["z_m"] == pytest.approx(1.3, abs=0.05)
     assert entry["peak_ratio"] is None or entry["peak_ratio"] >= 1.0
+
+
+def test_the_height_check_keeps_the_band_where_the_row_shows_an_object_on_the_floor():
+    """A column looking along +x whose best patch is a crate's centre, 0.12 m up, 3 m away:
+    only the stretch of floor where that row's ray is between the floor and the crate's top
+    (give or take the row's uncertainty) counts in full; a column without a row keeps all."""
+    levels = np.full((40, 80, 1), 0.0)  # bare floor, 8 m x 4 m
+    check = HeightCheck(SupportLevels(0.0, -2.0, 0.1, levels), object_height=0.25)
+    wedges = np.array([[-0.02, 0.02], [-0.02, 0.02]])
+    elevation = math.atan2(0.12 - 1.0, 3.0)
+    weights = check.weights((0.0, 0.0), wedges, np.array([elevation, np.nan]), 1.0, 0.05, 140)
+    distance = (np.arange(140) + 0.5) * 0.05
+    full = distance[weights[0] == 1.0]
+    # 1 - 0.293 d within [-0.1, 0.35] m, widened by 0.026 m per metre: 2.03 m to 4.12 m
+    assert full.min() == pytest.approx(2.03, abs=0.05) and full.max() == pytest.approx(
+        4.12, abs=0.05
+    )
+    assert set(np.unique(weights[0])) == {check.outside, 1.0}
+    assert (weights[1] == 1.0).all()
+    shaped = check.shape(
+        ColumnVisibility(np.full((2, 140), 0.5), 0.05), (0.0, 0.0), wedges,
+        np.array([elevation, np.nan]), 1.0,
+    )  # fmt: skip
+    np.testing.assert_allclose(shaped.profiles, 0.5 * weights)
+
+
+def test_a_mission_with_the_height_check_replays_from_its_log():
+    """``fuse_view`` (what the mission does) and ``ViewLog.fuse_into`` with the same check give
+    the same grid, and the check takes the look-alike in mid-air off the floor."""
+    spec = GridSpec(0.0, 0.0, 9.0, 7.0, 0.1)
+    log = _log_of(((2.0, 3.0), 1.3, 1.0), ((6.0, 3.0), 0.6, 0.8))
+    everywhere = ColumnVisibility.everywhere(8, 8.0)
+    seen = ViewLog(["box"], None)
+    for view in log.views:
+        seen.append(replace(view, visibility=everywhere))
+    levels = np.full((*spec.shape, 2), np.nan)
+    levels[..., 0] = 0.0
+    levels[28:33, 58:63, 1] = 0.45
+    check = HeightCheck(SupportLevels(0.0, 0.0, 0.1, levels), 0.2)
+    live = AccumulatorGrid(["box"], spec, make_rule("accumulate"), 4)
+    for view in seen.views:
+        fuse_view(live, view, None, height_check=check)
+    replayed = seen.fuse_into(AccumulatorGrid(["box"], spec, make_rule("accumulate"), 4),
+                              height_check=check)  # fmt: skip
+    np.testing.assert_array_equal(live.layer("box"), replayed.layer("box"))
+    plain = seen.fuse_into(AccumulatorGrid(["box"], spec, make_rule("accumulate"), 4))
+    mid_air, table = (30, 19), (30, 60)
+    assert plain.layer("box")[mid_air] > plain.layer("box")[table]
+    assert live.layer("box")[mid_air] < live.layer("box")[table]

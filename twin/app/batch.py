@@ -293,6 +293,7 @@ def run_batch_mission(spec: BatchSpec, run: int) -> dict[str, Any]:
     from twin.app.run import make_grids
     from twin.app.search import path_length
     from twin.app.survey import plan_views, run_survey
+    from twin.app.visibility_models import build_height_check
 
     started = time.perf_counter()
     key = repr(sorted(spec.identity().items())) + spec.config_folder + spec.working_dir
@@ -317,6 +318,7 @@ def run_batch_mission(spec: BatchSpec, run: int) -> dict[str, Any]:
         fuse_visibility=config.grid.visibility,
         belief=belief,
         confidence_options=config.confidence,
+        height_check=build_height_check(config, world.visibility),
     )
     setup = time.perf_counter() - started
     plan = plan_views(config.mission, world.robot.pantilt.limits)

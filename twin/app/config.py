@@ -92,6 +92,9 @@ class GridConfig:
     visibility: bool = True  # weigh each wedge by what the camera could see (a [visibility] model)
     by_distance: bool = False  # calibrated: each distance band's own likelihood ratios
     room_baseline: bool = True  # subtract what the room gains a cell without the object
+    # count a wedge's cells where the best patch's row shows an object standing on a surface
+    # there (twin.core.height.HeightCheck; needs a [visibility] model)
+    height_check: bool = False
 
 
 @dataclass(frozen=True)
@@ -713,7 +716,9 @@ def _grid(table: _Table, scene: Path) -> GridConfig:
         )
     max_range = table.number("max_range", None, lambda v: v > 0.0, "a positive range in metres")
     separation = table.number("peak_separation", 0.5, lambda v: v >= 0.0, "a distance >= 0 m")
-    switches = {"visibility": True, "by_distance": False, "room_baseline": True}
+    switches = {
+        "visibility": True, "by_distance": False, "room_baseline": True, "height_check": False,
+    }  # fmt: skip
     for key, default in switches.items():
         switches[key] = table.get(key, default)
         if not isinstance(switches[key], bool):

@@ -28,12 +28,12 @@ import numpy as np
 
 from twin.app.config import ConfidenceOptions
 from twin.app.record import EstimatePoint, Localization, NullRecorder, Recorder, ViewRecord
-from twin.app.view_log import LoggedView, ViewLog
+from twin.app.view_log import LoggedView, ViewLog, fuse_view
 from twin.core.devices import DeviceFaultError, Robot, View
 from twin.core.errors import TwinError
 from twin.core.geometry import CameraModel, Pose2D
 from twin.core.grid import AccumulatorGrid, Peak, Peaks
-from twin.core.height import HeightEstimate, best_patch_elevations, height_fits
+from twin.core.height import HeightCheck, HeightEstimate, best_patch_elevations, height_fits
 from twin.core.store import write_text_atomic
 from twin.core.visibility import ColumnVisibility, SupportLevels
 
@@ -249,7 +249,8 @@ class Mission:
     is a grid with the detector's calibrated rule (log-likelihood ratios), fused alongside
     ``grid`` (which may hold another rule, or be the same grid), always with the visibility
     when there is a model of it, for each object's ``confidence``, read with
-    ``confidence_options``.
+    ``confidence_options``. ``height_check`` weighs each wedge by where its best patches'
+    rows allow the object to stand (``twin.core.height.HeightCheck``).
     """
 
     def __init__(
@@ -272,6 +273,7 @@ class Mission:
         belief: AccumulatorGrid | None = None,
         confidence_options: ConfidenceOptions | None = None,
         views: ViewLog | None = None,
+        height_check: HeightCheck | None = None,
     ) -> None:
         names = list(detector.names)
         if sorted(names) != sorted(grid.objects):
@@ -302,9 +304,10 @@ class Mission:
         if len(self.views) != self.state.views_done:
             # An old checkpoint without a log: the log (and the belief) start from here.
             self.views = ViewLog(names, max_range)
+        self.height_check = height_check
         self.belief = belief
         if belief is not None and belief is not grid and belief.views(names[0]) == 0:
-            self.views.fuse_into(belief)
+            self.views.fuse_into(belief, height_check=height_check)
         # Robot time continues across resumes: this session's clock starts where the last
         # session's last view left it.
         self._clock_origin = robot.camera.now() - self.state.robot_time
@@ -353,23 +356,25 @@ class Mission:
         per_object = {name: values[i] for i, name in enumerate(self._names)}
         refusal = self.pose_gate.reason(view.pose_covariance) if self.pose_gate else None
         origin = (view.pose.x, view.pose.y)
-        self.views.append(
-            LoggedView(
-                origin,
-                wedges,
-                per_object,
-                seen,
-                refusal is None,
-                {name: elevations[i] for i, name in enumerate(self._names)},
-                self.camera_height,
-            )
+        logged = LoggedView(
+            origin,
+            wedges,
+            per_object,
+            seen,
+            refusal is None,
+            {name: elevations[i] for i, name in enumerate(self._names)},
+            self.camera_height,
         )
+        self.views.append(logged)
         if refusal is None:
             with self._timed("fuse"):
-                used = seen if self.fuse_visibility else None
-                self.grid.fuse_all(origin, wedges, per_object, self.max_range, used)
+                check = self.height_check
+                fuse_view(
+                    self.grid, logged, self.max_range,
+                    visibility=self.fuse_visibility, height_check=check,
+                )  # fmt: skip
                 if self.belief is not None and self.belief is not self.grid:
-                    self.belief.fuse_all(origin, wedges, per_object, self.max_range, seen)
+                    fuse_view(self.belief, logged, self.max_range, height_check=check)
         else:
             state.refused.append({"view": index, "reason": refusal})
             self.say(f"view {index + 1} not fused: {refusal}")

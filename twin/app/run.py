@@ -34,7 +34,7 @@ from twin.app.plots import grid_figure
 from twin.app.record import NullRecorder, Recorder, RerunRecorder, SceneInfo
 from twin.app.survey import plan_views, run_survey
 from twin.app.view_log import ViewLog
-from twin.app.visibility_models import build_visibility
+from twin.app.visibility_models import build_height_check, build_visibility
 from twin.core.errors import InputError, Terminated, TwinError
 from twin.core.grid import AccumulatorGrid
 from twin.core.store import json_safe, write_text_atomic
@@ -274,6 +274,7 @@ def _fly(config, robot, context, run, resume, started, quiet, on_result) -> dict
         belief=belief,
         confidence_options=config.confidence,
         views=views,
+        height_check=build_height_check(config, visibility),
     )
     searcher = None
     if options.mission == "search":
@@ -326,9 +327,12 @@ def _fly(config, robot, context, run, resume, started, quiet, on_result) -> dict
             state=state,
             truth=truth,
             max_range=config.grid.max_range,
+            visibility=visibility,
+            fuse_visibility=config.grid.visibility,
             belief=belief,
             confidence_options=_confidence(config, options),
             views=views,
+            height_check=build_height_check(config, visibility),
         )
     extra = None
     if searcher is not None:

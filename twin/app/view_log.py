@@ -21,7 +21,7 @@ import numpy as np
 
 from twin.core.errors import FileFormatError, InputError
 from twin.core.grid import AccumulatorGrid
-from twin.core.height import HeightEstimate, estimate_height
+from twin.core.height import HeightCheck, HeightEstimate, estimate_height
 from twin.core.store import load_arrays, save_arrays
 from twin.core.visibility import ColumnVisibility
 
@@ -44,6 +44,30 @@ class LoggedView:
     fused: bool = True
     elevations: dict[str, np.ndarray] | None = None
     camera_height: float = 1.0
+
+
+def fuse_view(
+    grid: AccumulatorGrid,
+    view: LoggedView,
+    max_range: float | None,
+    *,
+    visibility: bool = True,
+    height_check: HeightCheck | None = None,
+) -> None:
+    """Fuse one view into ``grid`` (every object it holds), with its visibility profiles unless
+    ``visibility`` is False; with a ``height_check`` each object's profiles are weighed by where
+    its best patches' rows allow it to stand (``twin.core.height.HeightCheck``), one object at
+    a time."""
+    seen = view.visibility if visibility else None
+    if height_check is None or seen is None or view.elevations is None:
+        values = {name: view.values[name] for name in grid.objects}
+        grid.fuse_all(view.origin, view.wedges, values, max_range, seen)
+        return
+    for name in grid.objects:
+        shaped = height_check.shape(
+            seen, view.origin, view.wedges, view.elevations[name], view.camera_height
+        )
+        grid.fuse_all(view.origin, view.wedges, {name: view.values[name]}, max_range, shaped)
 
 
 class ViewLog:
@@ -80,20 +104,16 @@ class ViewLog:
         visibility: bool = True,
         views: int | None = None,
         only_fused: bool = True,
+        height_check: HeightCheck | None = None,
     ) -> AccumulatorGrid:
         """Fuse the first ``views`` views (all by default) into ``grid``, as the mission did;
         ``visibility`` False ignores the logged profiles (the paper's "every cell in a wedge is
-        seen"); ``only_fused`` skips the views the mission refused. Returns ``grid``."""
+        seen"); ``only_fused`` skips the views the mission refused; ``height_check`` the
+        mission's (``fuse_view``). Returns ``grid``."""
         for view in self.views[:views]:
             if only_fused and not view.fused:
                 continue
-            grid.fuse_all(
-                view.origin,
-                view.wedges,
-                {name: view.values[name] for name in grid.objects},
-                self.max_range,
-                view.visibility if visibility else None,
-            )
+            fuse_view(grid, view, self.max_range, visibility=visibility, height_check=height_check)
         return grid
 
     # -- files ---------------------------------------------------------------------------

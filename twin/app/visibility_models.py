@@ -28,6 +28,7 @@ import numpy as np
 from twin.core.devices import View
 from twin.core.errors import TwinError
 from twin.core.geometry import CameraModel
+from twin.core.height import HeightCheck
 from twin.core.visibility import ColumnVisibility, SupportLevels, visibility_from_depth
 
 if TYPE_CHECKING:
@@ -180,3 +181,12 @@ def planning_visibility(
         camera,
         occupancy,
     )
+
+
+def build_height_check(config: SurveyConfig, visibility: object | None) -> HeightCheck | None:
+    """``[grid] height_check``'s ``HeightCheck`` on the visibility model's supports (None when
+    it is off or there is no model: without surfaces there is nothing to stand on)."""
+    supports = getattr(visibility, "supports", None)
+    if not config.grid.height_check or supports is None:
+        return None
+    return HeightCheck(supports, config.visibility.object_height_m)

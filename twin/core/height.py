@@ -23,6 +23,11 @@ import numpy as np
 
 from twin.core.errors import InputError
 from twin.core.geometry import CameraModel
+from twin.core.visibility import ColumnVisibility, SupportLevels
+
+# A best patch's row gives its elevation to about this: rows are 2.3 degrees apart and the
+# bump's centre is refined between them; the lens and the tilt add a little.
+ELEVATION_SIGMA = math.radians(1.5)
 
 
 def best_patch_elevations(
@@ -93,6 +98,68 @@ def height_fits(z: float, levels: np.ndarray, object_height: float, tolerance: f
     finite = np.asarray(levels, dtype=float)
     finite = finite[np.isfinite(finite)]
     return bool(np.any((finite - tolerance <= z) & (z <= finite + object_height + tolerance)))
+
+
+@dataclass(frozen=True)
+class HeightCheck:
+    """Where along a column an object could be that its best patch's row shows: a bearing is
+    a wedge on the plan, but the row is an elevation, and an object stands on a surface. At
+    distance ``d`` the row's ray is ``camera_height + d tan(e)`` up; a cell of the wedge counts
+    in full only where that height fits one of its ``supports`` (``height_fits``: between a
+    surface and ``object_height`` above it, with ``tolerance`` plus the row's uncertainty at
+    that distance), and by ``outside`` elsewhere.
+
+    Why: without it every cell of a wedge gains alike, so the bearings toward a look-alike on
+    a bookcase's top shelf cross on the bare floor in front of it and make a peak there, and a
+    crate on the floor, seen only from afar with the head level, is smeared along its wedge.
+    ``outside`` > 0 keeps a wrong row (the best patch on something above the object in the
+    same column) from erasing a view.
+    """
+
+    supports: SupportLevels
+    object_height: float
+    tolerance: float = 0.1
+    outside: float = 0.1
+
+    def weights(
+        self,
+        origin: tuple[float, float],
+        wedges: np.ndarray,
+        elevations: np.ndarray,
+        camera_height: float,
+        step: float,
+        bins: int,
+    ) -> np.ndarray:
+        """(columns, bins) weights in [``outside``, 1] for distance bins of ``step`` m along
+        each column's centre ray; a column without an elevation (NaN) keeps 1 everywhere."""
+        wedges = np.asarray(wedges, dtype=float)
+        elevation = np.asarray(elevations, dtype=float)
+        centre = 0.5 * (wedges[:, 0] + wedges[:, 1])
+        distance = (np.arange(bins) + 0.5) * step
+        x = origin[0] + np.cos(centre)[:, None] * distance[None, :]
+        y = origin[1] + np.sin(centre)[:, None] * distance[None, :]
+        levels = self.supports.sample(x, y)  # (columns, bins, k)
+        z = camera_height + distance[None, :] * np.tan(np.nan_to_num(elevation))[:, None]
+        slack = self.tolerance + distance * math.tan(ELEVATION_SIGMA)
+        fits = (levels - slack[None, :, None] <= z[..., None]) & (
+            z[..., None] <= levels + self.object_height + slack[None, :, None]
+        )
+        out = np.where(fits.any(axis=2), 1.0, self.outside)
+        out[~np.isfinite(elevation)] = 1.0
+        return out
+
+    def shape(
+        self,
+        seen: ColumnVisibility,
+        origin: tuple[float, float],
+        wedges: np.ndarray,
+        elevations: np.ndarray,
+        camera_height: float,
+    ) -> ColumnVisibility:
+        """``seen`` weighed by ``weights``: what a column could see and its row allows."""
+        bins = seen.profiles.shape[1]
+        weights = self.weights(origin, wedges, elevations, camera_height, seen.step, bins)
+        return ColumnVisibility(seen.profiles * weights, seen.step)
 
 
 def weighted_median(values: np.ndarray, weights: np.ndarray) -> float:

@@ -64,6 +64,7 @@ from twin.app.search import (
     view_choice,
 )
 from twin.app.survey import plan_views
+from twin.app.visibility_models import build_height_check
 from twin.core.confidence import posterior
 from twin.core.devices import DeviceError
 from twin.core.errors import InputError
@@ -350,6 +351,7 @@ class ObjectSearchEnv(gymnasium.Env):
             fuse_visibility=config.grid.visibility,
             belief=belief,
             confidence_options=config.confidence,
+            height_check=build_height_check(config, world.visibility),
         )
 
     def _new_searcher(self, mission: Mission) -> Searcher:
