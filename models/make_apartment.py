@@ -25,6 +25,8 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from twin.core.store import write_png
+
 HERE = Path(__file__).resolve().parent
 SCENES = HERE.parent / "scenes"
 SEED = 20261130
@@ -35,12 +37,7 @@ DOOR = 1.0  # metres: every door opening's width (the Peoplebot is ~0.5 m across
 
 
 def _write_png(path: Path, rgb: np.ndarray) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    bgr = cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR)
-    ok, buf = cv2.imencode(".png", bgr, [cv2.IMWRITE_PNG_COMPRESSION, 9])
-    if not ok:
-        raise RuntimeError(f"could not encode {path}")
-    path.write_bytes(buf.tobytes())
+    write_png(path, rgb, compression=9)
 
 
 # -- the sought objects ----------------------------------------------------------------------

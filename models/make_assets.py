@@ -19,17 +19,14 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from twin.core.store import write_png
+
 HERE = Path(__file__).resolve().parent
 SEED = 20090101
 
 
 def _write_png(path: Path, rgb: np.ndarray) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    bgr = cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR)
-    ok, buf = cv2.imencode(".png", bgr, [cv2.IMWRITE_PNG_COMPRESSION, 9])
-    if not ok:
-        raise RuntimeError(f"could not encode {path}")
-    path.write_bytes(buf.tobytes())
+    write_png(path, rgb, compression=9)
 
 
 def rice_box() -> np.ndarray:

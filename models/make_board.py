@@ -15,8 +15,9 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import cv2
 import numpy as np
+
+from twin.core.store import write_png
 
 HERE = Path(__file__).resolve().parent
 OUT = HERE / "textures" / "calibration_board.png"
@@ -42,11 +43,7 @@ def board() -> np.ndarray:
 
 
 def main() -> None:
-    ok, buf = cv2.imencode(".png", board(), [cv2.IMWRITE_PNG_COMPRESSION, 9])
-    if not ok:
-        raise RuntimeError(f"could not encode {OUT}")
-    OUT.parent.mkdir(parents=True, exist_ok=True)
-    OUT.write_bytes(buf.tobytes())
+    write_png(OUT, board(), compression=9)
     print(f"wrote {OUT}")
 
 

@@ -9,15 +9,12 @@ from __future__ import annotations
 
 import math
 import os
-from pathlib import Path
 from types import TracebackType
 
-import cv2
 import mujoco
 import numpy as np
 
 from twin.core.errors import TwinError
-from twin.core.store import write_atomic
 
 _GL_HINT = (
     "install Mesa's EGL (apt-get install libegl1 libgl1-mesa-dri) or set MUJOCO_GL=osmesa "
@@ -173,11 +170,3 @@ class FrameRenderer:
         tb: TracebackType | None,
     ) -> None:
         self.close()
-
-
-def write_png(path: str | Path, rgb: np.ndarray) -> Path:
-    """Write an RGB image (H x W x 3 uint8) as PNG, atomically."""
-    ok, buf = cv2.imencode(".png", cv2.cvtColor(np.ascontiguousarray(rgb), cv2.COLOR_RGB2BGR))
-    if not ok:
-        raise TwinError(f"could not encode a PNG for {path}; is the image H x W x 3 uint8?")
-    return write_atomic(path, lambda handle: handle.write(buf.tobytes()))
