@@ -95,3 +95,32 @@ def test_training_views_from_several_elevations():
     assert (above != level).mean() > 0.01
     with pytest.raises(InputError, match="camera_drop"):
         training_views(distances=(1.0,), angles=(0.0,), camera_drop=(0.4, float("nan")))
+
+
+def test_the_cache_key_follows_what_frames_are_rendered_from_not_the_mission_configs(
+    tmp_path, monkeypatch
+):
+    """A survey's stops (a .toml), the laser's map and the asset scripts change no frame: the
+    detectors stay cached; an MJCF or a texture changes the key."""
+    import twin.app.detection as detection
+
+    models, scenes = tmp_path / "models", tmp_path / "scenes"
+    (models / "textures").mkdir(parents=True)
+    scenes.mkdir()
+    (scenes / "room.xml").write_text("<mujoco/>")
+    (scenes / "room.toml").write_text("[mission]\n")
+    (models / "textures" / "box.png").write_bytes(b"png")
+    monkeypatch.setattr(detection, "models_dir", lambda: models)
+    monkeypatch.setattr(detection, "scenes_dir", lambda: scenes)
+    obj = ObjectConfig("box", None, "box")
+
+    def key() -> str:
+        return detection.cache_key(obj, {"k": 1})
+
+    first = key()
+    (scenes / "room.toml").write_text("[mission]\nstops = [[1, 2]]\n")
+    (models / "make_room.py").write_text("print()\n")
+    (scenes / "room_map.pgm").write_bytes(b"P5")
+    assert key() == first
+    (models / "textures" / "box.png").write_bytes(b"png2")
+    assert key() != first

@@ -50,10 +50,17 @@ CALIBRATION_RECIPE: dict[str, Any] = {
 ROOM_OBJECT_HEIGHT = 0.2  # m: the room log's visibility, as [visibility]'s default
 
 
+# Files under models/ and scenes/ that no frame is rendered from: the mission configs, the
+# laser's map and the scripts that generate the assets (whose outputs are hashed). Editing a
+# survey's stops must not retrain four detectors.
+NOT_RENDERED = frozenset({".py", ".pyc", ".toml", ".yaml", ".pgm", ".md"})
+
+
 def _tree_digest(folders: Sequence[Path]) -> str:
     digest = hashlib.sha256()
     for folder in folders:
-        for path in sorted(p for p in folder.rglob("*") if p.is_file() and p.suffix != ".pyc"):
+        files = (p for p in folder.rglob("*") if p.is_file() and p.suffix not in NOT_RENDERED)
+        for path in sorted(files):
             digest.update(str(path.relative_to(folder)).encode())
             digest.update(path.read_bytes())
     return digest.hexdigest()
