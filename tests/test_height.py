@@ -266,24 +266,3 @@ def test_a_mission_with_the_height_check_replays_from_its_log():
     mid_air, table = (30, 19), (30, 60)
     assert plain.layer("box")[mid_air] > plain.layer("box")[table]
     assert live.layer("box")[mid_air] < live.layer("box")[table]
-
-
-def test_an_object_of_known_size_must_stand_its_own_height_above_a_surface():
-    """Two tables at 0.45 m: a look-alike lying flat on one (its rows at 0.47 m) and the box
-    standing on the other (centre 0.15 m above the top). Between a surface and 0.2 m above it
-    both fit and the stronger look-alike wins; knowing the box's rest height, it is passed over."""
-    spec = GridSpec(0.0, 0.0, 9.0, 7.0, 0.1)
-    log = _log_of(((2.0, 3.0), 0.47, 1.0), ((6.0, 3.0), 0.6, 0.8))
-    grid = AccumulatorGrid(["box"], spec, make_rule("accumulate"), 4)
-    log.fuse_into(grid)
-    levels = np.full((*spec.shape, 2), np.nan)
-    levels[..., 0] = 0.0
-    levels[28:33, 18:23, 1] = levels[28:33, 58:63, 1] = 0.45
-    supports = SupportLevels(0.0, 0.0, 0.1, levels)
-    loose = locate(grid, "box", 0.5, log, supports, 0.2)
-    assert math.hypot(loose.peak.x - 2.0, loose.peak.y - 3.0) < 0.25
-    sized = locate(grid, "box", 0.5, log, supports, 0.2, rest_height=0.15)
-    assert math.hypot(sized.peak.x - 6.0, sized.peak.y - 3.0) < 0.25
-    assert len(sized.passed_over) == 1
-    entry = estimates(grid, None, 0.5, log, supports, rest_heights={"box": 0.15})["box"]
-    assert entry["estimate_m"][:2] == [sized.peak.x, sized.peak.y]

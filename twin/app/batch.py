@@ -290,7 +290,7 @@ class MissionWorld:
 def run_batch_mission(spec: BatchSpec, run: int) -> dict[str, Any]:
     """One randomized mission (the task a worker runs); returns its JSON-ready result."""
     from twin.app.mission import Mission
-    from twin.app.run import make_grids, rest_heights
+    from twin.app.run import make_grids
     from twin.app.search import path_length
     from twin.app.survey import plan_views, run_survey
     from twin.app.visibility_models import build_height_check
@@ -319,7 +319,6 @@ def run_batch_mission(spec: BatchSpec, run: int) -> dict[str, Any]:
         belief=belief,
         confidence_options=config.confidence,
         height_check=build_height_check(config, world.visibility),
-        rest_heights=rest_heights(config, sim.world),
     )
     setup = time.perf_counter() - started
     plan = plan_views(config.mission, world.robot.pantilt.limits)

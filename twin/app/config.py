@@ -198,9 +198,6 @@ class ObjectConfig:
     name: str
     model: Path | None
     body: str | None  # the scene body that is this object (ground truth and training), if any
-    # m: how high its centre stands above what it rests on (half its height for a box); None:
-    # the scene body's, in the twin, else unknown (``twin.app.mission.locate``)
-    rest_height: float | None = None
 
 
 @dataclass(frozen=True)
@@ -779,9 +776,8 @@ def _objects(table: _Table, folder: Path) -> tuple[ObjectConfig, ...]:
         if model_text is None and body is None:
             raise entry.fail("model", "give a model file, or the scene body to train one from")
         model = None if model_text is None else _resolve(model_text, folder, folder)
-        rest = entry.number("rest_height_m", None, lambda v: 0.0 < v <= 2.0, "a height in m")
         entry.finish()
-        objects.append(ObjectConfig(name, model, body, rest))
+        objects.append(ObjectConfig(name, model, body))
     table.finish()
     return tuple(objects)
 

@@ -18,7 +18,7 @@ from __future__ import annotations
 import json
 import math
 import time
-from collections.abc import Callable, Iterator, Mapping
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -250,8 +250,7 @@ class Mission:
     ``grid`` (which may hold another rule, or be the same grid), always with the visibility
     when there is a model of it, for each object's ``confidence``, read with
     ``confidence_options``. ``height_check`` weighs each wedge by where its best patches'
-    rows allow the object to stand (``twin.core.height.HeightCheck``). ``rest_heights`` (m,
-    per object whose size is known) sharpens which peaks ``locate`` accepts.
+    rows allow the object to stand (``twin.core.height.HeightCheck``).
     """
 
     def __init__(
@@ -275,7 +274,6 @@ class Mission:
         confidence_options: ConfidenceOptions | None = None,
         views: ViewLog | None = None,
         height_check: HeightCheck | None = None,
-        rest_heights: Mapping[str, float] | None = None,
     ) -> None:
         names = list(detector.names)
         if sorted(names) != sorted(grid.objects):
@@ -307,7 +305,6 @@ class Mission:
             # An old checkpoint without a log: the log (and the belief) start from here.
             self.views = ViewLog(names, max_range)
         self.height_check = height_check
-        self.rest_heights = dict(rest_heights or {})
         self.belief = belief
         if belief is not None and belief is not grid and belief.views(names[0]) == 0:
             self.views.fuse_into(belief, height_check=height_check)
@@ -429,9 +426,8 @@ class Mission:
         """Per object the estimate (and, in the sim, the truth and the error), the views fused,
         the robot time and where the time went (seconds)."""
         objects = estimates(
-            self.grid, self.truth, peak_separation, self.views, self.supports,
-            self.object_height, self.rest_heights,
-        )  # fmt: skip
+            self.grid, self.truth, peak_separation, self.views, self.supports, self.object_height
+        )
         for name, (confidence, p_absent) in self.confidence_details().items():
             objects[name]["confidence"] = round(confidence, 4)
             objects[name]["p_absent"] = round(p_absent, 4)
@@ -504,11 +500,10 @@ class Mission:
         there (``locate``, with the visibility model's supports when there is one)."""
         return {
             name: locate(
-                self.grid, name, peak_separation, self.views, self.supports,
-                self.object_height, rest_height=self.rest_heights.get(name),
+                self.grid, name, peak_separation, self.views, self.supports, self.object_height
             )
             for name in self._names
-        }  # fmt: skip
+        }
 
 
 def pose_error(state: MissionState) -> dict[str, float] | None:
@@ -558,17 +553,11 @@ def locate(
     supports: SupportLevels | None = None,
     object_height: float = 0.2,
     k: int = 3,
-    rest_height: float | None = None,
 ) -> Located:
     """The strongest of ``name``'s ``k`` peaks whose height (from ``views``) fits a surface of
     ``supports`` within a cell of it (``twin.core.height.height_fits``); the strongest peak when
     none fits, or without views or supports. Bearings from a few stops also cross in front of
-    a look-alike, on bare floor, and the patch rows then put the object in mid-air.
-
-    ``rest_height`` (m), when the object's size is known, is how high its centre stands above
-    what it rests on: then the height must be within 0.1 m of a surface plus that, not merely
-    between a surface and ``object_height`` above it (a box on a desk stands 0.15 m above the
-    top; the desk's own clutter, at its top, does not)."""
+    a look-alike, on bare floor, and the patch rows then put the object in mid-air."""
     peaks = grid.peaks(name, k=k, min_separation=min_separation)
 
     def height_at(peak: Peak) -> HeightEstimate | None:
@@ -584,13 +573,7 @@ def locate(
         if height is None:
             return Located(peak, height, peaks, tuple(passed))
         x, y = np.meshgrid(peak.x + offsets, peak.y + offsets)
-        levels = supports.sample(x, y)
-        fits = (
-            height_fits(height.z, levels, object_height)
-            if rest_height is None
-            else height_fits(height.z, levels + rest_height, 0.0)
-        )
-        if fits:
+        if height_fits(height.z, supports.sample(x, y), object_height):
             return Located(peak, height, peaks, tuple(passed))
         passed.append((peak, height.z))
     return Located(peaks.best, first, peaks)
@@ -603,7 +586,6 @@ def estimates(
     views: ViewLog | None = None,
     supports: SupportLevels | None = None,
     object_height: float = 0.2,
-    rest_heights: Mapping[str, float] | None = None,
 ) -> dict[str, dict[str, Any]]:
     """Per object: the best peak in metres (``locate``: with ``views`` and ``supports``, the
     strongest whose height fits a surface there), its value, its ratio to the next peak, and,
@@ -613,12 +595,10 @@ def estimates(
     rows its best patches were found in (``ViewLog.height``; None when no view with rows looks
     toward the estimate), with ``height_views`` and ``height_spread_m``; a truth with z adds
     ``height_error_m``. ``error_m`` stays the error in the plan. Peaks passed over are listed
-    in ``passed_over`` with the height their views gave; ``rest_heights`` gives ``locate`` each
-    object's centre above its support where its size is known."""
+    in ``passed_over`` with the height their views gave."""
     out: dict[str, dict[str, Any]] = {}
     for name in grid.objects:
-        rest = (rest_heights or {}).get(name)
-        found = locate(grid, name, min_separation, views, supports, object_height, rest_height=rest)
+        found = locate(grid, name, min_separation, views, supports, object_height)
         best, height, ratio = found.peak, found.height, found.ratio
         entry: dict[str, Any] = {
             "estimate_m": [round(best.x, 4), round(best.y, 4)],

@@ -275,7 +275,6 @@ def _fly(config, robot, context, run, resume, started, quiet, on_result) -> dict
         confidence_options=config.confidence,
         views=views,
         height_check=build_height_check(config, visibility),
-        rest_heights=rest_heights(config, sim.world if sim is not None else None),
     )
     searcher = None
     if options.mission == "search":
@@ -334,7 +333,6 @@ def _fly(config, robot, context, run, resume, started, quiet, on_result) -> dict
             confidence_options=_confidence(config, options),
             views=views,
             height_check=build_height_check(config, visibility),
-            rest_heights=rest_heights(config, sim.world if sim is not None else None),
         )
     extra = None
     if searcher is not None:
@@ -560,18 +558,6 @@ def stops_reachable(
         return bool(inside.all() and np.isfinite(far[rows, cols]).all())
 
     return judge
-
-
-def rest_heights(config: SurveyConfig, world) -> dict[str, float]:
-    """Each object's centre above what it rests on (m): its config's ``rest_height_m``, else
-    in the twin its scene body's (``World.rest_height``); unknown objects are left out."""
-    out = {}
-    for obj in config.objects:
-        if obj.rest_height is not None:
-            out[obj.name] = obj.rest_height
-        elif world is not None and obj.body is not None:
-            out[obj.name] = world.rest_height(obj.body)
-    return out
 
 
 def _truth(config: SurveyConfig, sim) -> dict[str, tuple[float, float, float]]:

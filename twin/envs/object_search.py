@@ -53,7 +53,7 @@ from gymnasium import spaces
 
 from twin.app.batch import BatchSpec, MissionWorld, ThresholdedDetector, draw_mission
 from twin.app.mission import Mission, estimates
-from twin.app.run import make_grids, rest_heights
+from twin.app.run import make_grids
 from twin.app.search import (
     Searcher,
     Situation,
@@ -352,7 +352,6 @@ class ObjectSearchEnv(gymnasium.Env):
             belief=belief,
             confidence_options=config.confidence,
             height_check=build_height_check(config, world.visibility),
-            rest_heights=rest_heights(config, world.sim.world),
         )
 
     def _new_searcher(self, mission: Mission) -> Searcher:
@@ -440,7 +439,6 @@ class ObjectSearchEnv(gymnasium.Env):
             mission.views,
             mission.supports,
             mission.object_height,
-            mission.rest_heights,
         )
         objects: dict[str, dict[str, Any]] = {}
         for name in self.objects:

@@ -276,20 +276,6 @@ class World:
             raise InputError(f"{self.path.name}: body {name!r} has no geoms, so no footprint")
         return Footprint(name, _convex_hull(np.concatenate(corners)[:, :2]), top)
 
-    def rest_height(self, name: str) -> float:
-        """How high body ``name``'s frame stands above what it rests on (m): the object's
-        centre above its support, for a box framed at its centre (geoms assumed upright)."""
-        body = self.body_id(name)
-        aabb, pos = self.model.geom_aabb, self.model.geom_pos
-        bottoms = [
-            float(pos[g, 2] + aabb[g, 2] - aabb[g, 5])
-            for g in range(self.model.ngeom)
-            if self.model.geom_bodyid[g] == body
-        ]
-        if not bottoms:
-            raise InputError(f"{self.path.name}: body {name!r} has no geoms to rest on")
-        return -min(bottoms)
-
     def footprints(self) -> dict[str, Footprint]:
         """Footprints of all furniture and targets, by body name (for drawing grid maps)."""
         return {name: self.footprint(name) for name in (*self.furniture(), *self.targets())}
