@@ -25,7 +25,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from twin.core.store import write_png
+from twin.sim.render import write_png
 
 HERE = Path(__file__).resolve().parent
 SCENES = HERE.parent / "scenes"

@@ -17,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
-from twin.core.store import write_png
+from twin.sim.render import write_png
 
 HERE = Path(__file__).resolve().parent
 OUT = HERE / "textures" / "calibration_board.png"

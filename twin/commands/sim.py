@@ -50,7 +50,7 @@ def _snapshot(args: argparse.Namespace) -> int:
     check_output_file(Path(args.out), "--out")
     pose = parse_pose(args.pose, "--pose")
     pan, tilt = _degrees(args.pan, "--pan"), _degrees(args.tilt, "--tilt")
-    from twin.core.store import write_png
+    from twin.sim.render import write_png
     from twin.sim.robot import ROBOT_CLEARANCE, SimRobot
     from twin.sim.world import World
 

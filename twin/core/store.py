@@ -52,21 +52,6 @@ def _current_umask() -> int:
     return mask
 
 
-def write_png(
-    path: str | os.PathLike[str], rgb: np.ndarray, compression: int | None = None
-) -> Path:
-    """Write an RGB image (H x W x 3 uint8) as PNG, atomically; ``compression`` 0-9 (OpenCV's
-    default when None; the generated textures use 9: they are committed)."""
-    import cv2  # only the writers of images need OpenCV loaded
-
-    params = [] if compression is None else [cv2.IMWRITE_PNG_COMPRESSION, int(compression)]
-    bgr = cv2.cvtColor(np.ascontiguousarray(rgb), cv2.COLOR_RGB2BGR)
-    ok, buf = cv2.imencode(".png", bgr, params)
-    if not ok:
-        raise InputError(f"could not encode a PNG for {path}; is the image H x W x 3 uint8?")
-    return write_atomic(path, lambda handle: handle.write(buf.tobytes()))
-
-
 def write_text_atomic(path: str | os.PathLike[str], text: str) -> Path:
     """Write UTF-8 text atomically (see ``write_atomic``)."""
     return write_atomic(path, lambda handle: handle.write(text.encode("utf-8")))

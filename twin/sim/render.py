@@ -9,12 +9,15 @@ from __future__ import annotations
 
 import math
 import os
+from pathlib import Path
 from types import TracebackType
 
+import cv2
 import mujoco
 import numpy as np
 
 from twin.core.errors import TwinError
+from twin.core.store import write_atomic
 
 _GL_HINT = (
     "install Mesa's EGL (apt-get install libegl1 libgl1-mesa-dri) or set MUJOCO_GL=osmesa "
@@ -170,3 +173,16 @@ class FrameRenderer:
         tb: TracebackType | None,
     ) -> None:
         self.close()
+
+
+def write_png(
+    path: str | os.PathLike[str], rgb: np.ndarray, compression: int | None = None
+) -> Path:
+    """Write an RGB image (H x W x 3 uint8) as PNG, atomically; ``compression`` 0-9 (OpenCV's
+    default when None; the generated textures use 9: they are committed)."""
+    params = [] if compression is None else [cv2.IMWRITE_PNG_COMPRESSION, int(compression)]
+    bgr = cv2.cvtColor(np.ascontiguousarray(rgb), cv2.COLOR_RGB2BGR)
+    ok, buf = cv2.imencode(".png", bgr, params)
+    if not ok:
+        raise TwinError(f"could not encode a PNG for {path}; is the image H x W x 3 uint8?")
+    return write_atomic(path, lambda handle: handle.write(buf.tobytes()))

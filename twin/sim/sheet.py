@@ -14,7 +14,7 @@ import cv2
 import numpy as np
 
 from twin.core.geometry import Pose2D
-from twin.core.store import write_png
+from twin.sim.render import write_png
 from twin.sim.robot import ROBOT_CLEARANCE, SimRobot
 from twin.sim.world import DEFAULT_SCENE, World
 
