@@ -346,3 +346,32 @@ def test_points_are_looked_up_where_the_lens_puts_them(lensed):
         assert (col, row) == pytest.approx((u, v), abs=1e-6)
     # a ray 80 degrees off the axis is outside a 47.5-degree field, whatever the polynomial says
     assert project(math.tan(math.radians(80)), 0.0, table) == (-1.0, -1.0)
+
+
+def test_nothing_is_seen_past_a_wall_however_thin():
+    """A column looking along +x at a 0.1 m wall 1.5 m away: the depth test alone lets a point
+    stand 0.2 m behind the surface (the object's own half-width), which is past the wall's far
+    face; past the wall's run of tall cells the profile is 0, before and inside it unchanged."""
+    from twin.core.visibility import TallMap, block_behind
+
+    tall = np.zeros((20, 40), bool)
+    tall[:, 15] = True  # x 1.5-1.6 m
+    walls = TallMap(0.0, -1.0, 0.1, tall)
+    profiles = np.ones((2, 60))  # 0.05 m bins to 3 m
+    blocked = block_behind(profiles, 0.05, (0.0, 0.0), np.array([0.0, math.pi]), walls)
+    r = (np.arange(60) + 0.5) * 0.05
+    assert (blocked[0, r < 1.6] == 1.0).all()  # up to and inside the wall
+    assert (blocked[0, r > 1.6] == 0.0).all()  # past it
+    assert (blocked[1] == 1.0).all()  # looking away
+
+
+def test_the_apartment_walls_are_tall_and_a_wall_cabinet_is_not():
+    from twin.sim.supports import tall_map
+    from twin.sim.world import World
+
+    walls = tall_map(World("apartment"))
+    x = np.array([4.55, 4.65, 7.6, 9.65, 0.3])
+    y = np.array([2.35, 2.35, 7.6, 7.65, 0.3])
+    # the living room-bedroom wall; the bedroom beside it; the counter under the wall
+    # cabinet; the fridge; the floor lamp
+    assert walls.sample(x, y).tolist() == [True, False, False, True, False]

@@ -228,6 +228,8 @@ def calibration_key(model_key: str, scene: str | None, effects: Any = None) -> s
         "ranges": DEFAULT_RANGES,
         # 2: a target the scene gives kinds of support stands on those (calibration_views)
         "placement": 2,
+        # the room log's visibility sees nothing past walls and tall furniture (TallMap)
+        "visibility": "walls",
     }
     if effects is not None:
         recipe["effects"] = effects_tag(effects)
@@ -259,7 +261,7 @@ def _calibrate(
     from twin.rfch.roc import column_truth
     from twin.sim import World, training
     from twin.sim.robot import PAPER_CAMERA
-    from twin.sim.supports import support_levels
+    from twin.sim.supports import support_levels, tall_map
 
     recipe = dict(CALIBRATION_RECIPE)
     min_cover = recipe.pop("min_cover")
@@ -284,7 +286,7 @@ def _calibrate(
     room = room_log(
         obj.name, views.poses, views.depths, scores, truth, PAPER_CAMERA,
         model.params.grid.column_spans(PAPER_CAMERA.width), support_levels(world),
-        ROOM_OBJECT_HEIGHT, math.hypot(x1 - x0, y1 - y0),
+        ROOM_OBJECT_HEIGHT, math.hypot(x1 - x0, y1 - y0), tall=tall_map(world),
     )  # fmt: skip
     return replace(model, calibration=calibration), room
 

@@ -21,7 +21,7 @@ from twin.app.view_log import LoggedView, ViewLog
 from twin.core.fusion import FusionRule, make_rule
 from twin.core.geometry import CameraModel, Pose2D
 from twin.core.grid import AccumulatorGrid, GridSpec
-from twin.core.visibility import ColumnVisibility, SupportLevels, visibility_from_depth
+from twin.core.visibility import ColumnVisibility, SupportLevels, TallMap, visibility_from_depth
 
 MIN_SEEN = 1.0  # full views of a cell before its baseline is trusted
 # A cell the room's views saw too little of takes the largest baseline of the trusted cells
@@ -43,6 +43,7 @@ def room_log(
     object_height: float,
     reach: float,
     camera_height: float = 1.0,
+    tall: TallMap | None = None,
 ) -> ViewLog:
     """The calibration frames as a view log of the room without ``name``: each frame's column
     scores over its wedges, visibility from its depth, and the columns that touch the object
@@ -52,7 +53,7 @@ def room_log(
         seen = visibility_from_depth(
             depth, camera, column_spans, origin=(x, y), axis=yaw, tilt=0.0,
             camera_height=camera_height, supports=supports, object_height=object_height,
-            reach=reach,
+            reach=reach, tall=tall,
         )  # fmt: skip
         profiles = np.where((np.asarray(labels) == 0)[:, None], seen.profiles, 0.0)
         wedges = camera.wedges(Pose2D(x, y, yaw), 0.0, column_spans)

@@ -29,7 +29,7 @@ from twin.core.devices import View
 from twin.core.errors import TwinError
 from twin.core.geometry import CameraModel
 from twin.core.height import HeightCheck
-from twin.core.visibility import ColumnVisibility, SupportLevels, visibility_from_depth
+from twin.core.visibility import ColumnVisibility, SupportLevels, TallMap, visibility_from_depth
 
 if TYPE_CHECKING:
     from twin.app.config import SurveyConfig
@@ -52,6 +52,7 @@ class DepthVisibility:
     reach: float
     camera_height: float = 1.0
     step: float = 0.05
+    tall: TallMap | None = None  # walls and tall furniture: nothing is seen past them
 
     def profiles(
         self, view: View, camera: CameraModel, column_spans: np.ndarray
@@ -69,6 +70,7 @@ class DepthVisibility:
             object_height=self.object_height,
             reach=self.reach,
             step=self.step,
+            tall=self.tall,
         )
 
 
@@ -138,10 +140,12 @@ def build_visibility(
         return None
     spec = config.grid.spec
     extent = (spec.x_min, spec.y_min, spec.x_max, spec.y_max)
+    tall = None
     if options.supports == "model":
-        from twin.sim.supports import support_levels
+        from twin.sim.supports import support_levels, tall_map
 
         supports = support_levels(world, cell_size=config.grid.spec.cell_size)
+        tall = tall_map(world, cell_size=config.grid.spec.cell_size)
     else:
         supports = SupportLevels.anywhere(extent, config.grid.spec.cell_size)
     if source == "depth":
@@ -161,6 +165,7 @@ def build_visibility(
         supports,
         options.object_height_m,
         default_reach(extent, config.grid.max_range),
+        tall=tall,
     )
 
 

@@ -73,6 +73,55 @@ class ColumnVisibility:
 
 
 @dataclass(frozen=True)
+class TallMap:
+    """Plan cells (row 0 at ``y_min``, ``cell_size`` m) covered by something no camera on the
+    robot sees over or through: walls, wardrobes, bookcases (``twin.sim.scene_map.tall_map``).
+
+    Why: the depth test lets a point stand up to its tolerance (0.2 m: half an object plus half
+    a cell) behind the surface the pixel hits, because when the object is there it is itself
+    that surface. A 0.1 m wall is thinner than that, so the living room's views saw the
+    bedroom desk's edge through it and a look-alike gained there. Past a run of tall cells
+    along a column, nothing is seen (``block_behind``); inside the run (a bookcase's own
+    shelves) the depth test decides."""
+
+    x_min: float
+    y_min: float
+    cell_size: float
+    tall: np.ndarray  # (ny, nx) bool
+
+    def sample(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+        """Whether each point (x, y) (metres) lies in a tall cell (outside the map: no)."""
+        x, y = np.asarray(x, dtype=float), np.asarray(y, dtype=float)
+        ny, nx = self.tall.shape
+        col = np.floor((x - self.x_min) / self.cell_size).astype(int)
+        row = np.floor((y - self.y_min) / self.cell_size).astype(int)
+        inside = (col >= 0) & (col < nx) & (row >= 0) & (row < ny)
+        out = np.zeros(x.shape, dtype=bool)
+        out[inside] = self.tall[row[inside], col[inside]]
+        return out
+
+
+def block_behind(
+    profiles: np.ndarray,
+    step: float,
+    origin: tuple[float, float],
+    bearings: np.ndarray,
+    tall: TallMap,
+) -> np.ndarray:
+    """``profiles`` (columns, bins) with every bin past a run of ``tall`` cells along its
+    column's ``bearings`` (map frame, radians) set to 0 (``TallMap``)."""
+    bins = profiles.shape[1]
+    r = (np.arange(bins) + 0.5) * step
+    bearings = np.asarray(bearings, dtype=float)
+    x = origin[0] + np.cos(bearings)[:, None] * r
+    y = origin[1] + np.sin(bearings)[:, None] * r
+    inside = tall.sample(x, y)
+    entered = np.maximum.accumulate(inside, axis=1)
+    behind = np.maximum.accumulate(entered & ~inside, axis=1)
+    return np.where(behind, 0.0, profiles)
+
+
+@dataclass(frozen=True)
 class SupportLevels:
     """Where an object could stand: per cell of a plan grid, the heights (m above the floor) of
     the horizontal surfaces there (the floor, seats, table tops, shelves), NaN-padded.
@@ -153,6 +202,7 @@ def visibility_from_depth(
     step: float = 0.05,
     tolerance: float = 0.2,
     samples: int = 4,
+    tall: TallMap | None = None,
 ) -> ColumnVisibility:
     """Per patch column, how visible an object of ``object_height`` metres would have been at
     each distance, from one view's depth (see the module docstring for the rule).
@@ -163,7 +213,8 @@ def visibility_from_depth(
     ``axis`` the optical axis bearing in the map (base yaw + pan) and ``tilt`` its elevation
     (radians, positive up). Profiles cover ``reach`` metres in bins of ``step``; ``tolerance``
     (metres) is how far short of the point the depth may stop and still count as the object
-    itself, ``samples`` the number of pixel columns sampled per patch column.
+    itself, ``samples`` the number of pixel columns sampled per patch column; with ``tall``
+    nothing past a wall along a column is seen (``block_behind``).
     """
     depth = np.asarray(depth)
     if depth.shape != (camera.height, camera.width):
@@ -211,7 +262,10 @@ def visibility_from_depth(
         tolerance,
         seen,
     )
-    return ColumnVisibility(seen / samples, step)
+    profiles = seen / samples
+    if tall is not None:
+        profiles = block_behind(profiles, step, origin, heading.mean(axis=1), tall)
+    return ColumnVisibility(profiles, step)
 
 
 def projection_of(camera: CameraModel) -> np.ndarray:

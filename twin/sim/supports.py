@@ -26,7 +26,7 @@ import mujoco
 import numpy as np
 
 from twin.core.errors import InputError
-from twin.core.visibility import SupportLevels
+from twin.core.visibility import SupportLevels, TallMap
 from twin.sim.world import World
 
 LEVEL_SLOPE = math.radians(10.0)  # radians: the most a standing surface's normal may tilt
@@ -304,3 +304,31 @@ def _merge(heights: np.ndarray) -> list[float]:
         else:
             merged.append(float(h))
     return merged
+
+
+# A wall or a solid piece of furniture: one geom standing from below the laser's plane to above
+# what the camera sees over (a wall, a wardrobe's door, a bookcase's side, the fridge).
+TALL_BAND = (0.3, 1.5)
+
+
+def tall_map(
+    world: World, cell_size: float = 0.1, band: tuple[float, float] = TALL_BAND
+) -> TallMap:
+    """The room's cells where one geom spans the whole ``band`` of heights (metres) at the
+    cell's centre: visibility sees nothing past them (``twin.core.visibility.TallMap``). A
+    floor lamp's pole or a wall cabinet over a counter does not count; the grid covers
+    ``world.room_bounds()``, as ``support_levels`` does."""
+    if not (math.isfinite(cell_size) and cell_size > 0):
+        raise InputError(f"tall map cell size must be a positive distance, got {cell_size!r} m")
+    x_min, y_min, x_max, y_max = world.room_bounds()
+    nx = max(1, math.ceil((x_max - x_min) / cell_size - 1e-9))
+    ny = max(1, math.ceil((y_max - y_min) / cell_size - 1e-9))
+    xs = x_min + (np.arange(nx) + 0.5) * cell_size
+    ys = y_min + (np.arange(ny) + 0.5) * cell_size
+    gx, gy = np.meshgrid(xs, ys)
+    spans = vertical_spans(
+        world, room_geoms(world, world.targets()), np.column_stack([gx.ravel(), gy.ravel()])
+    )
+    with np.errstate(invalid="ignore"):
+        solid = (spans.bottom <= band[0]) & (spans.top >= band[1])
+    return TallMap(x_min, y_min, cell_size, solid.any(axis=0).reshape(ny, nx))
