@@ -324,7 +324,7 @@ class LaserLocalizedBase(Base):
                 raise
             self._recoveries_left -= 1
             # touched something (or stalled): remember what the bumper felt, back away from it,
-            # find ourselves, and plan again once, around it
+            # find ourselves, and plan again around it (MAX_RECOVERIES a goal)
             bearing = fault.bearing if isinstance(fault, BumpedError) else None
             if bearing is not None:
                 touched = self.pose()

@@ -18,7 +18,7 @@ from __future__ import annotations
 import json
 import math
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Mapping
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -425,10 +425,10 @@ class Mission:
     def result(self, peak_separation: float = 0.5) -> dict[str, Any]:
         """Per object the estimate (and, in the sim, the truth and the error), the views fused,
         the robot time and where the time went (seconds)."""
-        objects = estimates(
-            self.grid, self.truth, peak_separation, self.views, self.supports, self.object_height
-        )
-        for name, (confidence, p_absent) in self.confidence_details().items():
+        # one choice of peak for the estimate and for its confidence
+        located = self.located(peak_separation)
+        objects = estimates(self.grid, self.truth, peak_separation, located=located)
+        for name, (confidence, p_absent) in self.confidence_details(located).items():
             objects[name]["confidence"] = round(confidence, 4)
             objects[name]["p_absent"] = round(p_absent, 4)
         result: dict[str, Any] = {
@@ -586,6 +586,7 @@ def estimates(
     views: ViewLog | None = None,
     supports: SupportLevels | None = None,
     object_height: float = 0.2,
+    located: Mapping[str, Located] | None = None,
 ) -> dict[str, dict[str, Any]]:
     """Per object: the best peak in metres (``locate``: with ``views`` and ``supports``, the
     strongest whose height fits a surface there), its value, its ratio to the next peak, and,
@@ -595,10 +596,14 @@ def estimates(
     rows its best patches were found in (``ViewLog.height``; None when no view with rows looks
     toward the estimate), with ``height_views`` and ``height_spread_m``; a truth with z adds
     ``height_error_m``. ``error_m`` stays the error in the plan. Peaks passed over are listed
-    in ``passed_over`` with the height their views gave."""
+    in ``passed_over`` with the height their views gave. ``located`` hands in ``locate``'s
+    answers already made (``Mission.located``)."""
     out: dict[str, dict[str, Any]] = {}
     for name in grid.objects:
-        found = locate(grid, name, min_separation, views, supports, object_height)
+        if located is not None:
+            found = located[name]
+        else:
+            found = locate(grid, name, min_separation, views, supports, object_height)
         best, height, ratio = found.peak, found.height, found.ratio
         entry: dict[str, Any] = {
             "estimate_m": [round(best.x, 4), round(best.y, 4)],
@@ -614,7 +619,7 @@ def estimates(
                 {"xy_m": [round(p.x, 4), round(p.y, 4)], "value": p.value, "z_m": round(z, 4)}
                 for p, z in found.passed_over
             ]
-        if views is not None:
+        if views is not None or located is not None:
             entry["estimate_m"].append(None if height is None else round(height.z, 4))
             entry["height_views"] = 0 if height is None else height.views
             entry["height_spread_m"] = None if height is None else round(height.spread, 4)

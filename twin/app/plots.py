@@ -10,6 +10,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from twin.core.geometry import is_wall
 from twin.core.store import write_atomic
 
 if TYPE_CHECKING:
@@ -355,7 +356,7 @@ def grid_figure(
     for name, outline in furniture:
         closed = np.vstack([outline, outline[:1]])
         ax.plot(closed[:, 0], closed[:, 1], color="tab:orange", lw=0.9)
-        if name.startswith("wall"):  # a wall reads as one; its name only hid the grid
+        if is_wall(name):
             continue
         centre = outline.mean(axis=0)
         ax.text(centre[0], centre[1], name.replace("_", " "), color="tab:orange", fontsize=6,

@@ -39,7 +39,7 @@ from twin.app.rerun_server import VIEWER_MEMORY_LIMIT, RerunServer, has_display
 from twin.core.devices import LaserMount, Scan, View
 from twin.core.errors import TwinError
 from twin.core.fusion import FusionRule
-from twin.core.geometry import CameraModel, Footprint, Pose2D
+from twin.core.geometry import CameraModel, Footprint, Pose2D, is_wall
 from twin.core.grid import AccumulatorGrid
 from twin.core.visibility import ColumnVisibility
 from twin.nav.maps import OccupancyMap
@@ -720,7 +720,7 @@ class RerunRecorder:
                     centers=[[*(0.5 * (lo + hi)), 0.5 * item.top]],
                     half_sizes=[[*(0.5 * (hi - lo)), 0.5 * item.top]],
                     colors=[150, 130, 110],
-                    labels=[item.name],
+                    labels=None if is_wall(item.name) else [item.name],
                 ),
                 static=True,
             )
@@ -731,7 +731,7 @@ class RerunRecorder:
                     [np.vstack([f.polygon, f.polygon[:1]]) for f in scene.furniture],
                     colors=[205, 170, 125],
                     radii=0.02,
-                    labels=[f.name for f in scene.furniture],
+                    labels=["" if is_wall(f.name) else f.name for f in scene.furniture],
                     draw_order=11.0,
                 ),
                 static=True,

@@ -256,6 +256,13 @@ def _relative_wedges(
     return result
 
 
+def is_wall(name: str) -> bool:
+    """Whether a scene body is a wall between rooms (the scenes name them ``wall_*``): drawn in
+    the viewer and the grid images like furniture, but not labelled, since a wall reads as one
+    and a dozen wall names hid an apartment's grid."""
+    return name.startswith("wall_")
+
+
 @dataclass(frozen=True)
 class Footprint:
     """A body's outline on the floor: convex polygon (n, 2) in map metres, CCW, and top height."""

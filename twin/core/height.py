@@ -95,9 +95,18 @@ def height_fits(z: float, levels: np.ndarray, object_height: float, tolerance: f
     it, give or take ``tolerance`` (what a height from patch rows is good to). A peak in front
     of a bookcase whose views put the object 1.3 m above a bare floor is a bearing crossing,
     not an object; ``levels`` from ``SupportLevels.anywhere`` accept every height."""
-    finite = np.asarray(levels, dtype=float)
-    finite = finite[np.isfinite(finite)]
-    return bool(np.any((finite - tolerance <= z) & (z <= finite + object_height + tolerance)))
+    levels = np.asarray(levels, dtype=float).ravel()
+    return bool(_fits(np.asarray(z, dtype=float), levels, object_height, tolerance))
+
+
+def _fits(
+    z: np.ndarray, levels: np.ndarray, object_height: float, slack: float | np.ndarray
+) -> np.ndarray:
+    """Whether each height ``z`` (...) lies between one of its ``levels`` (..., k; NaN: none)
+    and ``object_height`` above it, give or take ``slack`` (broadcast with ``z``)."""
+    z, slack = z[..., None], np.asarray(slack)[..., None]
+    with np.errstate(invalid="ignore"):
+        return ((levels - slack <= z) & (z <= levels + object_height + slack)).any(axis=-1)
 
 
 @dataclass(frozen=True)
@@ -141,10 +150,7 @@ class HeightCheck:
         levels = self.supports.sample(x, y)  # (columns, bins, k)
         z = camera_height + distance[None, :] * np.tan(np.nan_to_num(elevation))[:, None]
         slack = self.tolerance + distance * math.tan(ELEVATION_SIGMA)
-        fits = (levels - slack[None, :, None] <= z[..., None]) & (
-            z[..., None] <= levels + self.object_height + slack[None, :, None]
-        )
-        out = np.where(fits.any(axis=2), 1.0, self.outside)
+        out = np.where(_fits(z, levels, self.object_height, slack), 1.0, self.outside)
         out[~np.isfinite(elevation)] = 1.0
         return out
 

@@ -75,7 +75,8 @@ class ColumnVisibility:
 @dataclass(frozen=True)
 class TallMap:
     """Plan cells (row 0 at ``y_min``, ``cell_size`` m) covered by something no camera on the
-    robot sees over or through: walls, wardrobes, bookcases (``twin.sim.scene_map.tall_map``).
+    robot sees over or through: walls, a wardrobe's door, a bookcase's sides, the fridge
+    (``twin.sim.supports.tall_map``: one geom from 0.3 m to 1.5 m up).
 
     Why: the depth test lets a point stand up to its tolerance (0.2 m: half an object plus half
     a cell) behind the surface the pixel hits, because when the object is there it is itself
@@ -91,14 +92,22 @@ class TallMap:
 
     def sample(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
         """Whether each point (x, y) (metres) lies in a tall cell (outside the map: no)."""
-        x, y = np.asarray(x, dtype=float), np.asarray(y, dtype=float)
-        ny, nx = self.tall.shape
-        col = np.floor((x - self.x_min) / self.cell_size).astype(int)
-        row = np.floor((y - self.y_min) / self.cell_size).astype(int)
-        inside = (col >= 0) & (col < nx) & (row >= 0) & (row < ny)
-        out = np.zeros(x.shape, dtype=bool)
+        row, col, inside = _cells_of(x, y, self.x_min, self.y_min, self.cell_size, self.tall.shape)
+        out = np.zeros(row.shape, dtype=bool)
         out[inside] = self.tall[row[inside], col[inside]]
         return out
+
+
+def _cells_of(
+    x: np.ndarray, y: np.ndarray, x_min: float, y_min: float, cell: float, shape: tuple[int, ...]
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The (row, col) of the plan cell under each point (metres) of a map whose row 0 is at
+    ``y_min``, and whether it lies inside the map's ``shape[:2]``."""
+    x, y = np.asarray(x, dtype=float), np.asarray(y, dtype=float)
+    col = np.floor((x - x_min) / cell).astype(int)
+    row = np.floor((y - y_min) / cell).astype(int)
+    inside = (col >= 0) & (col < shape[1]) & (row >= 0) & (row < shape[0])
+    return row, col, inside
 
 
 def block_behind(
@@ -149,14 +158,13 @@ class SupportLevels:
 
     def sample(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
         """(..., k) support heights under the points (x, y) (metres), NaN-padded."""
-        x, y = np.asarray(x, dtype=float), np.asarray(y, dtype=float)
-        ny, nx, k = self.levels.shape
-        col = np.floor((x - self.x_min) / self.cell_size).astype(int)
-        row = np.floor((y - self.y_min) / self.cell_size).astype(int)
-        inside = (col >= 0) & (col < nx) & (row >= 0) & (row < ny)
+        k = self.levels.shape[2]
+        row, col, inside = _cells_of(
+            x, y, self.x_min, self.y_min, self.cell_size, self.levels.shape
+        )
         floor_only = np.full(k, np.nan)
         floor_only[0] = 0.0
-        out = np.broadcast_to(floor_only, (*x.shape, k)).copy()
+        out = np.broadcast_to(floor_only, (*row.shape, k)).copy()
         out[inside] = self.levels[row[inside], col[inside]]
         return out
 

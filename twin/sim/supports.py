@@ -276,13 +276,7 @@ def support_levels(
         raise InputError(f"support max height must be a height >= 0 m, got {max_height!r}")
     if not (math.isfinite(headroom) and headroom >= 0):
         raise InputError(f"support headroom must be a distance >= 0 m, got {headroom!r}")
-    x_min, y_min, x_max, y_max = world.room_bounds()
-    nx = max(1, math.ceil((x_max - x_min) / cell_size - 1e-9))
-    ny = max(1, math.ceil((y_max - y_min) / cell_size - 1e-9))
-    xs = x_min + (np.arange(nx) + 0.5) * cell_size
-    ys = y_min + (np.arange(ny) + 0.5) * cell_size
-    gx, gy = np.meshgrid(xs, ys)
-    centres = np.column_stack([gx.ravel(), gy.ravel()])
+    x_min, y_min, ny, nx, centres = _cell_centres(world, cell_size)
     levels = vertical_spans(world, room_geoms(world, world.targets()), centres).levels(headroom)
     with np.errstate(invalid="ignore"):
         levels = np.where(levels <= max_height + 1e-9, np.maximum(levels, 0.0), np.nan)
@@ -293,6 +287,18 @@ def support_levels(
     for n, row in enumerate(rows):
         out[n, : len(row)] = row
     return SupportLevels(x_min, y_min, cell_size, out.reshape(ny, nx, k))
+
+
+def _cell_centres(world: World, cell_size: float) -> tuple[float, float, int, int, np.ndarray]:
+    """The plan grid over ``world.room_bounds()``: its lower-left corner, its rows and columns,
+    and its (rows x columns, 2) cell centres in metres, row by row from y_min."""
+    x_min, y_min, x_max, y_max = world.room_bounds()
+    nx = max(1, math.ceil((x_max - x_min) / cell_size - 1e-9))
+    ny = max(1, math.ceil((y_max - y_min) / cell_size - 1e-9))
+    gx, gy = np.meshgrid(
+        x_min + (np.arange(nx) + 0.5) * cell_size, y_min + (np.arange(ny) + 0.5) * cell_size
+    )
+    return x_min, y_min, ny, nx, np.column_stack([gx.ravel(), gy.ravel()])
 
 
 def _merge(heights: np.ndarray) -> list[float]:
@@ -320,15 +326,8 @@ def tall_map(
     ``world.room_bounds()``, as ``support_levels`` does."""
     if not (math.isfinite(cell_size) and cell_size > 0):
         raise InputError(f"tall map cell size must be a positive distance, got {cell_size!r} m")
-    x_min, y_min, x_max, y_max = world.room_bounds()
-    nx = max(1, math.ceil((x_max - x_min) / cell_size - 1e-9))
-    ny = max(1, math.ceil((y_max - y_min) / cell_size - 1e-9))
-    xs = x_min + (np.arange(nx) + 0.5) * cell_size
-    ys = y_min + (np.arange(ny) + 0.5) * cell_size
-    gx, gy = np.meshgrid(xs, ys)
-    spans = vertical_spans(
-        world, room_geoms(world, world.targets()), np.column_stack([gx.ravel(), gy.ravel()])
-    )
+    x_min, y_min, ny, nx, centres = _cell_centres(world, cell_size)
+    spans = vertical_spans(world, room_geoms(world, world.targets()), centres)
     with np.errstate(invalid="ignore"):
         solid = (spans.bottom <= band[0]) & (spans.top >= band[1])
     return TallMap(x_min, y_min, cell_size, solid.any(axis=0).reshape(ny, nx))
