@@ -306,3 +306,38 @@ def test_each_stop_may_have_its_own_tilt():
         with pytest.raises(ConfigError, match=key.replace("[", r"\[")) as caught:
             load_config(None, overrides=[stops, f"mission.stop_tilts_deg={bad}"])
         assert "\n" not in str(caught.value)
+
+
+def test_a_floor_sweep_looks_for_the_objects_that_stand_on_the_floor():
+    """floor_tilt_deg: every stop sweeps again that far down, for the objects whose stands_on
+    names the floor; an unknown kind of surface or a tilt up is refused in one line."""
+    from twin.app.survey import plan_views
+    from twin.core.devices import VCC4_LIMITS
+
+    stops = "mission.stops=[[1.1, 1.2], [2.5, 3.3]]"
+    config = load_config(
+        "apartment", overrides=[stops, "mission.floor_tilt_deg=-25", "mission.tilt_deg=-4"]
+    )
+    assert config.floor_objects == ("toy_crate",)
+    plan = plan_views(config.mission, VCC4_LIMITS, config.floor_objects)
+    assert len(plan) == 2 * 2 * 8 and [v.index for v in plan] == list(range(len(plan)))
+    down = [v for v in plan if v.objects is not None]
+    assert {v.objects for v in down} == {("toy_crate",)}
+    assert {round(math.degrees(v.tilt), 6) for v in down} == {-25.0}
+    for stop in (0, 1):
+        level = [v for v in plan if v.stop == stop and v.objects is None]
+        floor = [v for v in plan if v.stop == stop and v.objects is not None]
+        assert len(level) == len(floor) == 8
+        def headings(views):
+            return {round(math.degrees(v.base.yaw + v.pan)) % 360 for v in views}
+
+        assert headings(floor) == headings(level) and len(headings(level)) == 8
+    assert len(plan_views(config.mission, VCC4_LIMITS)) == 16  # no floor objects: no sweep
+    for bad, key in (
+        ("mission.floor_tilt_deg=5", "floor_tilt_deg"),
+        ('objects.toy_crate.stands_on=["rug"]', "stands_on"),
+        ('objects.toy_crate.stands_on="floor"', "stands_on"),
+    ):
+        with pytest.raises(ConfigError, match=key) as caught:
+            load_config("apartment", overrides=[stops, bad])
+        assert "\n" not in str(caught.value)

@@ -266,3 +266,26 @@ def test_a_mission_with_the_height_check_replays_from_its_log():
     mid_air, table = (30, 19), (30, 60)
     assert plain.layer("box")[mid_air] > plain.layer("box")[table]
     assert live.layer("box")[mid_air] < live.layer("box")[table]
+
+
+def test_an_object_known_to_stand_on_the_floor_is_not_the_peak_on_a_table():
+    """``SupportLevels.of_kinds``: a crate that lives on the floor (``stands_on``) passes over
+    the stronger peak whose height fits only the table's top there."""
+    spec = GridSpec(0.0, 0.0, 9.0, 7.0, 0.1)
+    log = _log_of(((6.0, 3.0), 0.6, 1.0), ((2.0, 3.0), 0.12, 0.8))
+    grid = AccumulatorGrid(["box"], spec, make_rule("accumulate"), 4)
+    log.fuse_into(grid)
+    levels = np.full((*spec.shape, 2), np.nan)
+    levels[..., 0] = 0.0
+    levels[28:33, 58:63, 1] = 0.45  # a table round (6, 3)
+    supports = SupportLevels(0.0, 0.0, 0.1, levels)
+    anywhere = locate(grid, "box", 0.5, log, supports, object_height=0.2)
+    assert math.hypot(anywhere.peak.x - 6.0, anywhere.peak.y - 3.0) < 0.25
+    floor = supports.of_kinds(("floor",))
+    assert np.isnan(floor.levels[30, 60, 1]) and floor.levels[30, 60, 0] == 0.0
+    found = locate(grid, "box", 0.5, log, floor, object_height=0.2)
+    assert math.hypot(found.peak.x - 2.0, found.peak.y - 3.0) < 0.25
+    tables = supports.of_kinds(("table",))
+    assert np.isnan(tables.levels[10, 10]).all() and tables.levels[30, 60, 1] == 0.45
+    with pytest.raises(InputError, match="sofa"):
+        supports.of_kinds(("sofa",))

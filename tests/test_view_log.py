@@ -99,3 +99,28 @@ def test_a_damaged_log_is_a_one_line_error(tmp_path) -> None:
     path.write_bytes(b"not a zip file")
     with pytest.raises(FileFormatError):
         ViewLog.load(path)
+
+
+def test_a_view_taken_for_some_objects_only_is_fused_into_theirs(tmp_path) -> None:
+    """The floor sweep's views are for the floor's objects: NaN values for the others leave
+    their layers and view counts untouched, live and replayed from the saved log."""
+    views = _views(np.random.default_rng(7), n=4)
+    for_box = [
+        LoggedView(v.origin, v.wedges, {**v.values, "cup": np.full(len(v.wedges), np.nan)},
+                   v.visibility)
+        for v in views
+    ]  # fmt: skip
+    log = ViewLog(["box", "cup"], 3.0)
+    for view in for_box:
+        log.append(view)
+    log.save(tmp_path / "views.npz")
+    replayed = ViewLog.load(tmp_path / "views.npz").fuse_into(
+        AccumulatorGrid(["box", "cup"], SPEC, make_rule("accumulate"), 4)
+    )
+    assert replayed.views("box") == 4 and replayed.views("cup") == 0
+    assert not replayed.evidence("cup").any()
+    only_box = AccumulatorGrid(["box"], SPEC, make_rule("accumulate"), 4)
+    for view in views:
+        only_box.fuse_all(view.origin, view.wedges, {"box": view.values["box"]}, 3.0,
+                          view.visibility)  # fmt: skip
+    np.testing.assert_array_equal(replayed.evidence("box"), only_box.evidence("box"))

@@ -319,9 +319,10 @@ def run_batch_mission(spec: BatchSpec, run: int) -> dict[str, Any]:
         belief=belief,
         confidence_options=config.confidence,
         height_check=build_height_check(config, world.visibility),
+        stands_on={obj.name: obj.stands_on for obj in config.objects},
     )
     setup = time.perf_counter() - started
-    plan = plan_views(config.mission, world.robot.pantilt.limits)
+    plan = plan_views(config.mission, world.robot.pantilt.limits, config.floor_objects)
     search: dict[str, Any] = {}
     failed: dict[str, str] = {}
     searcher = None

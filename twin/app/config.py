@@ -28,6 +28,7 @@ from twin.core.errors import InputError
 from twin.core.fusion import RULES, FusionRule, make_rule
 from twin.core.grid import GridSpec
 from twin.core.options import OptionError, option, parse_options
+from twin.core.visibility import SUPPORT_KINDS
 from twin.resources import scenes_dir
 
 DEFAULT_CONFIG_NAME = "living_room_survey.toml"
@@ -71,6 +72,9 @@ class MissionConfig:
     turn: str = "pan"
     tilt: float = 0.0
     stop_tilts: tuple[float, ...] = ()  # radians, one per stop; empty: every stop at ``tilt``
+    # radians: every stop sweeps its headings again this far down, for the objects that stand on
+    # the floor; None: no such sweep
+    floor_tilt: float | None = None
 
     def tilt_at(self, stop: int) -> float:
         """The head's tilt (radians, up positive) for every view of stop ``stop``."""
@@ -198,6 +202,9 @@ class ObjectConfig:
     name: str
     model: Path | None
     body: str | None  # the scene body that is this object (ground truth and training), if any
+    # the kinds of surface it stands on (keys of twin.core.visibility.SUPPORT_KINDS); empty:
+    # any. A toy crate that lives on the floor is no look-alike's peak on a desk.
+    stands_on: tuple[str, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -249,6 +256,12 @@ class SurveyConfig:
     visibility: VisibilityOptions = field(default_factory=VisibilityOptions)
     confidence: ConfidenceOptions = field(default_factory=ConfidenceOptions)
     search: SearchOptions = field(default_factory=SearchOptions)
+
+    @property
+    def floor_objects(self) -> tuple[str, ...]:
+        """The objects that stand on the floor (``stands_on``): the mission's floor sweep
+        (``[mission] floor_tilt_deg``) looks for these."""
+        return tuple(obj.name for obj in self.objects if "floor" in obj.stands_on)
 
     @property
     def uses_sim_world(self) -> bool:
@@ -666,6 +679,13 @@ def _mission(table: _Table) -> MissionConfig:
             if isinstance(v, bool) or not isinstance(v, int | float) or not in_range[0](v):
                 raise table.fail(f"stop_tilts_deg[{i}]", f"expected {in_range[1]}, got {v!r}")
         stop_tilts = tuple(math.radians(v) for v in values)
+    floor_tilt = None
+    if table.has("floor_tilt_deg"):
+        floor_tilt = math.radians(
+            table.number(
+                "floor_tilt_deg", None, lambda v: -30.0 <= v < 0.0, "a tilt in [-30, 0) degrees"
+            )
+        )
     table.finish()
     return MissionConfig(
         (start[0], start[1], math.radians(start[2])),
@@ -674,6 +694,7 @@ def _mission(table: _Table) -> MissionConfig:
         turn,
         math.radians(tilt),
         stop_tilts,
+        floor_tilt,
     )
 
 
@@ -776,8 +797,17 @@ def _objects(table: _Table, folder: Path) -> tuple[ObjectConfig, ...]:
         if model_text is None and body is None:
             raise entry.fail("model", "give a model file, or the scene body to train one from")
         model = None if model_text is None else _resolve(model_text, folder, folder)
+        stands_on = entry.get("stands_on", [])
+        if (
+            not isinstance(stands_on, list)
+            or not all(isinstance(kind, str) for kind in stands_on)
+            or not set(stands_on) <= set(SUPPORT_KINDS)
+        ):
+            raise entry.fail(
+                "stands_on", f"expected a list of some of {list(SUPPORT_KINDS)}, got {stands_on!r}"
+            )
         entry.finish()
-        objects.append(ObjectConfig(name, model, body))
+        objects.append(ObjectConfig(name, model, body, tuple(stands_on)))
     table.finish()
     return tuple(objects)
 

@@ -20,7 +20,7 @@ import math
 import time
 from collections.abc import Callable, Iterator, Mapping
 from contextlib import contextmanager
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Protocol, runtime_checkable
 
@@ -274,6 +274,7 @@ class Mission:
         confidence_options: ConfidenceOptions | None = None,
         views: ViewLog | None = None,
         height_check: HeightCheck | None = None,
+        stands_on: Mapping[str, tuple[str, ...]] | None = None,
     ) -> None:
         names = list(detector.names)
         if sorted(names) != sorted(grid.objects):
@@ -297,17 +298,29 @@ class Mission:
         self.visibility, self.fuse_visibility = visibility, fuse_visibility
         # Where objects may stand, when the visibility model knows: a peak whose height fits
         # no surface there is passed over (``locate``).
-        self.supports: SupportLevels | None = getattr(visibility, "supports", None)
+        # An object known to stand on some kinds of surface only (``stands_on``: a crate on
+        # the floor) may be only there.
+        supports: SupportLevels | None = getattr(visibility, "supports", None)
+        kinds = dict(stands_on or {})
+        self.supports: dict[str, SupportLevels | None] = {
+            name: supports.of_kinds(kinds[name]) if supports and kinds.get(name) else supports
+            for name in names
+        }
         self.object_height: float = getattr(visibility, "object_height", 0.2)
         self.confidence_options = confidence_options or ConfidenceOptions()
         self.views = views if views is not None else ViewLog(names, max_range)
         if len(self.views) != self.state.views_done:
             # An old checkpoint without a log: the log (and the belief) start from here.
             self.views = ViewLog(names, max_range)
-        self.height_check = height_check
+        self.height_check: dict[str, HeightCheck] | None = None
+        if height_check is not None:
+            self.height_check = {
+                name: replace(height_check, supports=self.supports[name] or height_check.supports)
+                for name in names
+            }
         self.belief = belief
         if belief is not None and belief is not grid and belief.views(names[0]) == 0:
-            self.views.fuse_into(belief, height_check=height_check)
+            self.views.fuse_into(belief, height_check=self.height_check)
         # Robot time continues across resumes: this session's clock starts where the last
         # session's last view left it.
         self._clock_origin = robot.camera.now() - self.state.robot_time
@@ -354,15 +367,25 @@ class Mission:
             seen = self.visibility.profiles(view, camera, spans) if self.visibility else None
         index = state.views_done
         per_object = {name: values[i] for i, name in enumerate(self._names)}
+        # A view for some objects only (the floor sweep) says nothing about the others.
+        wanted = getattr(target, "objects", None)
+        unscored = np.full(len(wedges), np.nan)
+        logged_values = {
+            name: per_object[name] if wanted is None or name in wanted else unscored
+            for name in self._names
+        }
         refusal = self.pose_gate.reason(view.pose_covariance) if self.pose_gate else None
         origin = (view.pose.x, view.pose.y)
         logged = LoggedView(
             origin,
             wedges,
-            per_object,
+            logged_values,
             seen,
             refusal is None,
-            {name: elevations[i] for i, name in enumerate(self._names)},
+            {
+                name: np.where(np.isfinite(logged_values[name]), elevations[i], np.nan)
+                for i, name in enumerate(self._names)
+            },
             self.camera_height,
         )
         self.views.append(logged)
@@ -500,7 +523,12 @@ class Mission:
         there (``locate``, with the visibility model's supports when there is one)."""
         return {
             name: locate(
-                self.grid, name, peak_separation, self.views, self.supports, self.object_height
+                self.grid,
+                name,
+                peak_separation,
+                self.views,
+                self.supports[name],
+                self.object_height,
             )
             for name in self._names
         }

@@ -247,7 +247,7 @@ def _fly(config, robot, context, run, resume, started, quiet, on_result) -> dict
     state, views = MissionState(), None
     if resume and checkpoint.grid_path.is_file():
         grid, state, views, belief = _checkpointed(checkpoint, config, detector, rooms)
-    plan = plan_views(config.mission, robot.pantilt.limits)
+    plan = plan_views(config.mission, robot.pantilt.limits, config.floor_objects)
     recorder = _recorder(out, options, resume, say)
     gate = None
     occupancy = None
@@ -275,6 +275,7 @@ def _fly(config, robot, context, run, resume, started, quiet, on_result) -> dict
         confidence_options=config.confidence,
         views=views,
         height_check=build_height_check(config, visibility),
+        stands_on={obj.name: obj.stands_on for obj in config.objects},
     )
     searcher = None
     if options.mission == "search":
@@ -333,6 +334,7 @@ def _fly(config, robot, context, run, resume, started, quiet, on_result) -> dict
             confidence_options=_confidence(config, options),
             views=views,
             height_check=build_height_check(config, visibility),
+            stands_on={obj.name: obj.stands_on for obj in config.objects},
         )
     extra = None
     if searcher is not None:

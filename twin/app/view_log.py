@@ -13,7 +13,7 @@ robot, the frames and the detector are the same.
 from __future__ import annotations
 
 import os
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -32,7 +32,8 @@ VIEW_LOG_VERSION = 1
 @dataclass(frozen=True)
 class LoggedView:
     """One view: the camera's plan position (m), its columns' bearing intervals (n, 2) in
-    radians, each object's n column values, the visibility profiles (or None) and whether the
+    radians, each object's n column values (NaN for an object the view was not taken for),
+    the visibility profiles (or None) and whether the
     mission fused it (a view whose pose was too uncertain is logged but not fused); and, for
     heights (``twin.core.height``), each object's best-patch elevation per column (radians;
     None in logs written before heights were kept) and the camera's height (m)."""
@@ -52,19 +53,24 @@ def fuse_view(
     max_range: float | None,
     *,
     visibility: bool = True,
-    height_check: HeightCheck | None = None,
+    height_check: HeightCheck | Mapping[str, HeightCheck] | None = None,
 ) -> None:
     """Fuse one view into ``grid`` (every object it holds), with its visibility profiles unless
-    ``visibility`` is False; with a ``height_check`` each object's profiles are weighed by where
-    its best patches' rows allow it to stand (``twin.core.height.HeightCheck``), one object at
-    a time."""
+    ``visibility`` is False; with a ``height_check`` (one for all objects, or each object's
+    own) each object's profiles are weighed by where its best patches' rows allow it to stand
+    (``twin.core.height.HeightCheck``), one object at a time."""
     seen = view.visibility if visibility else None
+    # A view taken for some objects only (NaN values for the rest) is fused into theirs.
+    names = [name for name in grid.objects if np.isfinite(view.values[name]).all()]
+    if not names:
+        return
     if height_check is None or seen is None or view.elevations is None:
-        values = {name: view.values[name] for name in grid.objects}
+        values = {name: view.values[name] for name in names}
         grid.fuse_all(view.origin, view.wedges, values, max_range, seen)
         return
-    for name in grid.objects:
-        shaped = height_check.shape(
+    for name in names:
+        check = height_check[name] if isinstance(height_check, Mapping) else height_check
+        shaped = check.shape(
             seen, view.origin, view.wedges, view.elevations[name], view.camera_height
         )
         grid.fuse_all(view.origin, view.wedges, {name: view.values[name]}, max_range, shaped)
@@ -104,7 +110,7 @@ class ViewLog:
         visibility: bool = True,
         views: int | None = None,
         only_fused: bool = True,
-        height_check: HeightCheck | None = None,
+        height_check: HeightCheck | Mapping[str, HeightCheck] | None = None,
     ) -> AccumulatorGrid:
         """Fuse the first ``views`` views (all by default) into ``grid``, as the mission did;
         ``visibility`` False ignores the logged profiles (the paper's "every cell in a wedge is

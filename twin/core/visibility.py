@@ -130,6 +130,19 @@ def block_behind(
     return np.where(behind, 0.0, profiles)
 
 
+# The kinds of surface an object may stand on, by the surface's height (metres, inclusive): the
+# floor and what lies flat on it (a rug, tiles); seats, coffee, dining and bedside tables and
+# desks; kitchen counters and cabinets of counter height; shelves between the 1.0 m camera and a
+# reaching hand (not a bed's headboard, 1.1 m). A mission's ``stands_on`` and the twin's
+# placements (``twin.sim.placement``) both name them.
+SUPPORT_KINDS: dict[str, tuple[float, float]] = {
+    "floor": (0.0, 0.05),
+    "table": (0.3, 0.8),
+    "counter": (0.8, 1.0),
+    "shelf": (1.12, 1.65),
+}
+
+
 @dataclass(frozen=True)
 class SupportLevels:
     """Where an object could stand: per cell of a plan grid, the heights (m above the floor) of
@@ -167,6 +180,24 @@ class SupportLevels:
         out = np.broadcast_to(floor_only, (*row.shape, k)).copy()
         out[inside] = self.levels[row[inside], col[inside]]
         return out
+
+    def of_kinds(self, kinds: tuple[str, ...]) -> SupportLevels:
+        """Only the surfaces of ``kinds`` (keys of ``SUPPORT_KINDS``): where an object that is
+        known to stand on the floor, say, could be. A cell with none of them keeps none (NaN)."""
+        unknown = [kind for kind in kinds if kind not in SUPPORT_KINDS]
+        if unknown or not kinds:
+            raise InputError(
+                f"unknown kinds of support {unknown or list(kinds)}; use some of "
+                f"{', '.join(SUPPORT_KINDS)}"
+            )
+        keep = np.zeros(self.levels.shape, dtype=bool)
+        with np.errstate(invalid="ignore"):
+            for kind in kinds:
+                low, high = SUPPORT_KINDS[kind]
+                keep |= (self.levels >= low - 1e-9) & (self.levels <= high + 1e-9)
+        return SupportLevels(
+            self.x_min, self.y_min, self.cell_size, np.where(keep, self.levels, np.nan)
+        )
 
     @classmethod
     def anywhere(

@@ -142,7 +142,7 @@ class ObjectSearchEnv(gymnasium.Env):
                 f"belief, and {missing[0]!r} has no calibration: store one with 'twin roc "
                 "--store', or give it a scene body to train from (objects.NAME.body)"
             )
-        self._plan = plan_views(config_.mission, world.robot.pantilt.limits)
+        self._plan = plan_views(config_.mission, world.robot.pantilt.limits, config_.floor_objects)
         self.objects: tuple[str, ...] = self._empty_grids[0].objects
         self._truth: dict[str, tuple[float, float, float]] = {}
         # A first searcher, on a mission never flown, builds (or loads) the candidate views and
@@ -352,6 +352,7 @@ class ObjectSearchEnv(gymnasium.Env):
             belief=belief,
             confidence_options=config.confidence,
             height_check=build_height_check(config, world.visibility),
+            stands_on={obj.name: obj.stands_on for obj in config.objects},
         )
 
     def _new_searcher(self, mission: Mission) -> Searcher:
@@ -429,17 +430,11 @@ class ObjectSearchEnv(gymnasium.Env):
         stopped, the action mask, the places the base refused to reach (``unreachable``) and
         the draw (see the module docstring). Fresh objects every call: a caller may keep them."""
         mission, search = self.mission, self._searcher
-        details = mission.confidence_details()
+        located = mission.located(self.config.grid.peak_separation)
+        details = mission.confidence_details(located)
         states = verdicts(mission, self._searcher.rule)
         truth = self._truth
-        found = estimates(
-            mission.grid,
-            truth,
-            self.config.grid.peak_separation,
-            mission.views,
-            mission.supports,
-            mission.object_height,
-        )
+        found = estimates(mission.grid, truth, self.config.grid.peak_separation, located=located)
         objects: dict[str, dict[str, Any]] = {}
         for name in self.objects:
             seen = mission.views_done > 0

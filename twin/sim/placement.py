@@ -31,6 +31,7 @@ import numpy as np
 
 from twin.core.errors import InputError, TwinError
 from twin.core.geometry import Pose2D
+from twin.core.visibility import SUPPORT_KINDS
 from twin.sim.supports import RENDERED_GROUPS, room_geoms, subtree_bodies, vertical_spans
 from twin.sim.world import World
 
@@ -44,16 +45,6 @@ VIEW_RADII = (1.0, 1.5, 2.0, 2.5)  # metres from the object where a camera may s
 VIEW_BEARINGS = 16  # directions per radius
 VIEW_CLEARANCE = 0.25  # metres: a camera spot keeps this far from walls and furniture
 STANDING_FACE = 0.99  # a face whose normal points this straight down is the one it stands on
-# The kinds of support an object may belong to, by the height (metres, inclusive) of the surface
-# it stands on: the floor and what lies flat on it (a rug, tiles); seats, coffee, dining and
-# bedside tables and desks; kitchen counters and cabinets of counter height; shelves between the
-# 1.0 m camera and a reaching hand (not a bed's headboard, 1.1 m).
-SUPPORT_KINDS: dict[str, tuple[float, float]] = {
-    "floor": (0.0, 0.05),
-    "table": (0.3, 0.8),
-    "counter": (0.8, 1.0),
-    "shelf": (1.12, 1.65),
-}
 SPOT_STEP = 0.05  # metres: the grid on which place_targets finds where each kind of support is
 PARK = -1000.0  # metres: where targets wait, far outside any room, while others are placed
 

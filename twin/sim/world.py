@@ -213,7 +213,7 @@ class World:
     def target_supports(self) -> dict[str, tuple[str, ...]]:
         """Each target's kinds of support (custom text ``twin_target_supports``: entries
         "name:kind" or "name:kind|kind" separated by spaces, kinds as in
-        ``twin.sim.placement.SUPPORT_KINDS``); targets it does not name are left out."""
+        ``twin.core.visibility.SUPPORT_KINDS``); targets it does not name are left out."""
         text = self._custom_text("twin_target_supports") or ""
         found: dict[str, tuple[str, ...]] = {}
         targets = self.targets()
