@@ -388,3 +388,29 @@ def test_prepare_detector_calibrates_through_effects_under_their_own_key(tmp_pat
     # Clean frames keep the key they had before effects existed; a camera changes it.
     assert calibration_key("m", "x") == calibration_key("m", "x", None)
     assert calibration_key("m", "x", camera) != calibration_key("m", "x")
+
+
+def test_calibration_frames_are_taken_at_the_surveys_tilt(tmp_path, counted_views):
+    """A survey that looks 4 degrees down is calibrated on frames 4 degrees down, under its own
+    key (a level calibration keeps the key it had)."""
+    from twin.app.detection import calibration_key
+
+    objects = [ObjectConfig("blue", None, "blue_box")]
+    prepare_detector(
+        objects, {"n_clusters": 8}, tmp_path, say=lambda _: None, calibration_scene="living_room",
+        calibration_tilt=math.radians(-4.0),
+    )  # fmt: skip
+    assert counted_views["calibration"][0][2]["tilt"] == pytest.approx(math.radians(-4.0))
+    assert calibration_key("m", "x", None, 0.0) == calibration_key("m", "x")
+    assert calibration_key("m", "x", None, math.radians(-4.0)) != calibration_key("m", "x")
+
+
+def test_calibration_views_look_down_at_the_tilt_from_the_same_poses():
+    """The floor comes nearer in the bottom row of frames taken 20 degrees down."""
+    from twin.sim.training import calibration_views
+
+    recipe = {"n_placements": 1, "views_per_placement": 2, "aimed_fraction": 0.0}
+    level = calibration_views(**recipe)
+    down = calibration_views(**recipe, tilt=math.radians(-20.0))
+    np.testing.assert_array_equal(level.poses, down.poses)
+    assert np.nanmedian(down.depths[:, -1, :]) < 0.8 * np.nanmedian(level.depths[:, -1, :])

@@ -328,6 +328,7 @@ def test_a_floor_sweep_looks_for_the_objects_that_stand_on_the_floor():
         level = [v for v in plan if v.stop == stop and v.objects is None]
         floor = [v for v in plan if v.stop == stop and v.objects is not None]
         assert len(level) == len(floor) == 8
+
         def headings(views):
             return {round(math.degrees(v.base.yaw + v.pan)) % 360 for v in views}
 

@@ -44,19 +44,21 @@ def room_log(
     reach: float,
     camera_height: float = 1.0,
     tall: TallMap | None = None,
+    tilt: float = 0.0,
 ) -> ViewLog:
     """The calibration frames as a view log of the room without ``name``: each frame's column
     scores over its wedges, visibility from its depth, and the columns that touch the object
-    (``truth`` not 0) seen nowhere, so they say nothing about the room."""
+    (``truth`` not 0) seen nowhere, so they say nothing about the room. ``tilt`` (radians) is
+    the head's in every frame."""
     log = ViewLog([name], reach)
     for (x, y, yaw), depth, values, labels in zip(poses, depths, scores, truth, strict=True):
         seen = visibility_from_depth(
-            depth, camera, column_spans, origin=(x, y), axis=yaw, tilt=0.0,
+            depth, camera, column_spans, origin=(x, y), axis=yaw, tilt=tilt,
             camera_height=camera_height, supports=supports, object_height=object_height,
             reach=reach, tall=tall,
         )  # fmt: skip
         profiles = np.where((np.asarray(labels) == 0)[:, None], seen.profiles, 0.0)
-        wedges = camera.wedges(Pose2D(x, y, yaw), 0.0, column_spans)
+        wedges = camera.wedges(Pose2D(x, y, yaw), 0.0, column_spans, tilt)
         visibility = ColumnVisibility(profiles, seen.step)
         log.append(LoggedView((x, y), wedges, {name: np.asarray(values)}, visibility))
     return log

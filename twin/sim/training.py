@@ -121,6 +121,7 @@ def calibration_views(
     height: int = PAPER_CAMERA.height,
     lighting: tuple[float, float] = (1.0, 1.0),
     effects: Effects | None = None,
+    tilt: float = 0.0,
 ) -> CalibrationViews:
     """Head-camera frames of ``scene`` with the target at random furniture tops, and its masks.
 
@@ -128,8 +129,9 @@ def calibration_views(
     reserved range, see ``CALIBRATION_SEED``) the target moves to a random level furniture top
     (``random_surface_pose``; or to its own kind of support, if the scene declares one), then
     the robot stands at ``views_per_placement`` random free floor poses (``ROBOT_CLEARANCE`` m
-    from walls and furniture, at least ``min_distance`` m from the target) with its head level
-    and straight, so the camera is at its 1 m height. A share ``aimed_fraction`` of the views
+    from walls and furniture, at least ``min_distance`` m from the target) with its head straight
+    and at ``tilt`` (radians, up positive: the survey's, so that the room is seen as the
+    survey sees it), the camera at its 1 m height. A share ``aimed_fraction`` of the views
     face the target give or take half the field of view (so it lands anywhere across the frame,
     or is hidden behind furniture); the others face a uniformly random direction and mostly
     miss it, as most survey views do.
@@ -186,7 +188,7 @@ def calibration_views(
                 else:
                     yaw = rng.uniform(-math.pi, math.pi)
                 # No settling: only the pose matters for a frame, and physics would cost time.
-                robot.place(Pose2D(x, y, float(yaw)), settle=0.0)
+                robot.place(Pose2D(x, y, float(yaw)), tilt=tilt, settle=0.0)
                 if fovy is not None:  # the effects' wider canvas, for this render only
                     world.model.cam_fovy[robot.camera_id] = math.degrees(fovy)
                 try:
