@@ -79,3 +79,21 @@ def test_none_means_the_papers_every_cell_is_seen(world):
         build_visibility(load_config(None, overrides=["visibility.source=none"]), world, CAMERA)
         is None
     )
+
+
+def test_a_large_object_does_not_hide_its_own_centre(world):
+    """The depth test lets a point stand the object's near side plus half a cell behind what
+    its pixel hits: before a wall 2.75 m away, a crate of radius 0.25 m counts as seen 0.1 m
+    farther out than the default 0.15 m allows (its centre behind its own near side)."""
+    depth = np.full((CAMERA.height, CAMERA.width), 2.75)
+
+    def farthest_seen(radius: float) -> float:
+        config = load_config(None, overrides=[f"visibility.object_radius_m={radius}"])
+        visibility = build_visibility(config, world, CAMERA)
+        assert visibility.tolerance == pytest.approx(radius + 0.05)
+        profiles = visibility.profiles(_view(depth), CAMERA, SPANS)
+        middle = profiles.profiles[len(SPANS) // 2]
+        return (np.flatnonzero(middle > 0).max() + 1) * profiles.step
+
+    near, far = farthest_seen(0.15), farthest_seen(0.25)
+    assert 2.6 < near < 2.95 and far - near == pytest.approx(0.1, abs=0.051)

@@ -120,6 +120,11 @@ class VisibilityOptions:
     object_height_m: float = option(
         0.2, unit="m", low=0.02, high=2.0, doc="how tall the smallest sought object is"
     )
+    object_radius_m: float = option(
+        0.15, unit="m", low=0.0, high=1.0,
+        doc="how far the largest sought object's near side stands before its centre: the depth "
+        "there hits the object itself, which does not hide it",
+    )  # fmt: skip
 
 
 @dataclass(frozen=True)

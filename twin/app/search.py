@@ -571,7 +571,7 @@ def search_candidates(config: Any, world: Any, camera: Any, planner_map: Any, sp
         camera=[camera.width, camera.height, camera.hfov],
         spans=np.asarray(spans),
         visibility=[config.visibility.source, config.visibility.supports,
-                    config.visibility.object_height_m],
+                    config.visibility.object_height_m, config.visibility.object_radius_m],
         tilt=config.mission.tilt,
         reach=reach,
     )  # fmt: skip
