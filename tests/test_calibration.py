@@ -414,3 +414,26 @@ def test_calibration_views_look_down_at_the_tilt_from_the_same_poses():
     down = calibration_views(**recipe, tilt=math.radians(-20.0))
     np.testing.assert_array_equal(level.poses, down.poses)
     assert np.nanmedian(down.depths[:, -1, :]) < 0.8 * np.nanmedian(level.depths[:, -1, :])
+
+
+def test_objects_calibrated_in_parallel_processes_match_one_after_another():
+    """``_calibrate_all`` in two spawned processes gives each object what calibrating it in
+    this process gives (its own seeds, its camera reset), and says what each measured."""
+    from twin.app.detection import _calibrate_all
+    from twin.rfch import RFCH
+
+    images, masks = square_views((200, 60, 40), (40, 120, 200))
+    model = RFCH.train("box", list(images), list(masks), n_clusters=8)
+    objects = [ObjectConfig("near", None, "rice_box"), ObjectConfig("far", None, "rice_box")]
+    models = {"near": model, "far": model}
+    recipe = {"n_placements": 1, "views_per_placement": 3, "aimed_fraction": 1.0,
+              "min_cover": 0.25, "lighting": (0.8, 1.2)}  # fmt: skip
+    said: list[str] = []
+    apart = _calibrate_all(models, objects, "living_room", said.append, recipe=recipe, workers=2)
+    alone = _calibrate_all(models, objects, "living_room", lambda _: None, recipe=recipe, workers=1)
+    assert "2 processes" in said[0] and sum("calibration of" in line for line in said) == 2
+    for obj, (model_a, room_a), (model_b, room_b) in zip(objects, apart, alone, strict=True):
+        assert model_a.calibration == model_b.calibration
+        assert room_a.objects == room_b.objects == (obj.name,) and len(room_a) == 3
+        for view_a, view_b in zip(room_a.views, room_b.views, strict=True):
+            np.testing.assert_array_equal(view_a.values[obj.name], view_b.values[obj.name])

@@ -270,21 +270,24 @@ def _calibrate_all(
     say: Callable[[str], None],
     effects: Any = None,
     tilt: float = 0.0,
+    recipe: dict[str, Any] | None = None,
+    workers: int | None = None,
 ) -> list[tuple[Any, Any]]:
-    """``_calibrate`` for each of ``objects``, in as many processes as there are objects and
-    cores: each object's frames are rendered and scored on their own (a cold apartment survey
-    spent 178 s calibrating four objects one after another). The results are the same either
-    way: every object's frames come from its own seeds and a camera reset for it."""
-    workers = min(len(objects), os.cpu_count() or 1)
+    """``_calibrate`` for each of ``objects``, in ``workers`` processes (default: as many as
+    there are objects and cores): each object's frames are rendered and scored on their own (a
+    cold apartment survey spent 178 s calibrating four objects one after another). The results
+    are the same either way: every object's frames come from its own seeds and a camera reset
+    for it."""
+    workers = min(len(objects), workers or os.cpu_count() or 1)
     if workers < 2:
-        return [_calibrate(models[o.name], o, scene, say, effects, tilt) for o in objects]
+        return [_calibrate(models[o.name], o, scene, say, effects, tilt, recipe) for o in objects]
     names = ", ".join(repr(o.name) for o in objects)
     say(f"calibrating the RFCH models of {names} on {scene} views ({workers} processes)")
     # spawn, not fork: a forked child would share the parent's MuJoCo and EGL state.
     context = multiprocessing.get_context("spawn")
     with ProcessPoolExecutor(workers, mp_context=context) as pool:
         jobs = [
-            pool.submit(_calibrate_telling, models[o.name], o, scene, effects, tilt)
+            pool.submit(_calibrate_telling, models[o.name], o, scene, effects, tilt, recipe)
             for o in objects
         ]
         out = []
@@ -297,11 +300,16 @@ def _calibrate_all(
 
 
 def _calibrate_telling(
-    model: Any, obj: ObjectConfig, scene: str, effects: Any, tilt: float
+    model: Any,
+    obj: ObjectConfig,
+    scene: str,
+    effects: Any,
+    tilt: float,
+    recipe: dict[str, Any] | None,
 ) -> tuple[Any, Any, list[str]]:
     """``_calibrate`` in a worker process, with what it would have said."""
     said: list[str] = []
-    calibrated, room = _calibrate(model, obj, scene, said.append, effects, tilt)
+    calibrated, room = _calibrate(model, obj, scene, said.append, effects, tilt, recipe)
     return calibrated, room, said
 
 
@@ -312,10 +320,12 @@ def _calibrate(
     say: Callable[[str], None],
     effects: Any = None,
     tilt: float = 0.0,
+    recipe: dict[str, Any] | None = None,
 ) -> tuple[Any, Any]:
     """``model`` with its score calibration measured on ``scene`` (module docstring), and the
     room's look without the object from the same frames (``twin.app.room``); the frames pass
-    through the camera ``effects`` if given, with the head at ``tilt`` (``calibration_views``)."""
+    through the camera ``effects`` if given, with the head at ``tilt`` (``calibration_views``),
+    by ``recipe`` (default ``CALIBRATION_RECIPE``)."""
     from dataclasses import replace
 
     from twin.app.room import room_log
@@ -326,7 +336,7 @@ def _calibrate(
     from twin.sim.robot import PAPER_CAMERA
     from twin.sim.supports import support_levels, tall_map
 
-    recipe = dict(CALIBRATION_RECIPE)
+    recipe = dict(CALIBRATION_RECIPE if recipe is None else recipe)
     min_cover = recipe.pop("min_cover")
     say(f"calibrating the RFCH model of {obj.name!r} on {scene} views")
     if effects is not None and hasattr(effects, "reset"):
