@@ -182,6 +182,7 @@ class SimRobot:
         self._head_goal = [0.0, 0.0]
         self._head_speed = [self.head_limits.pan_speed, self.head_limits.tilt_speed]
         self._wheels = (0.0, 0.0)
+        self._speed = 0.0
         # called after every physics step (recorders, wire-protocol emulators, tests)
         self.listeners: list[Callable[[SimRobot], None]] = []
         # Held while stepping and rendering: the serial twins step the world from a thread.
@@ -309,6 +310,7 @@ class SimRobot:
             d.act[actadr] = angle
         self._head_goal = [pan, tilt]
         self._wheels = (0.0, 0.0)
+        self._speed = 0.0
         self.world.forward()
         self.advance(settle)
         self.odometry.rng = np.random.default_rng(self.odometry_errors.seed)
@@ -360,6 +362,7 @@ class SimRobot:
 
     # -- base -----------------------------------------------------------------------------------
     def set_wheel_speeds(self, v: float, omega: float) -> None:
+        self._speed = float(v)  # the body speed asked for, m/s: what a pressed bumper stalls
         limit = float(self.world.model.actuator_ctrlrange[self._wheel_act[0], 1])
         left, right = self.geometry.wheel_speeds(v, omega)
         self._wheels = (float(np.clip(left, -limit, limit)), float(np.clip(right, -limit, limit)))
@@ -417,15 +420,21 @@ class SimRobot:
         The stall is like the Pioneer's flag (motor current, ``StallMonitor``), not a position
         check: the wheels slip against an obstacle, so odometry alone would think the base moves.
         A touch is caught at once, even one that turns the base without straining the motors.
+        Except one the base drives straight away from (a bumper behind it while it goes
+        forward, or ahead while it backs): as the firmware's bump stall, which stops travel
+        toward a pressed bumper only. A base resting against a crate otherwise could never
+        leave it: every later drive, away from it too, failed at its first step.
         """
         touches = self.contacts()
         if touches:
             pose = self.truth_pose()
-            raise self._fault(
-                asked,
-                f"contact: {touches[0].describe()}, truth pose {_fmt(pose)}",
-                bumper_bearing(pose, touches[0]),
-            )
+            for touch in touches:
+                bearing = bumper_bearing(pose, touch)
+                if self._speed * math.cos(bearing) < -1e-6 * abs(self._speed):
+                    continue  # leaving it
+                raise self._fault(
+                    asked, f"contact: {touch.describe()}, truth pose {_fmt(pose)}", bearing
+                )
         torque = self.world.data.actuator_force[self._wheel_act]
         left, right = self.stall.update(self.world.time, float(torque[0]), float(torque[1]))
         if left or right:
