@@ -222,18 +222,22 @@ def test_driving_into_a_wall_names_the_wall() -> None:
 
 def test_a_base_against_a_wall_backs_away_but_cannot_push_on() -> None:
     """As the firmware's bump stall: a base resting with its front against the wall cannot
-    drive on into it, or turn against it, but can back straight away (one resting against a
-    crate could otherwise never leave it: every later drive failed at its first step)."""
+    drive on into it, but can back straight away (one resting against a crate could otherwise
+    never leave it: every later drive failed at its first step); a new touch, on the way back,
+    is a fault again."""
     sim, robot = make_sim_robot(start=Pose2D(3.8, 3.9, 0.0))
     with robot.base as base:
-        for speed, turn in ((0.1, 0.0), (0.0, 0.5)):
-            sim.place(Pose2D(4.305, 3.9, 0.0), settle=0.0)  # the chassis front 5 mm in
-            assert sim.contacts()
-            with pytest.raises(BumpedError, match="wall_right"):
-                base.drive(speed, turn, 1.0)
+        sim.place(Pose2D(4.305, 3.9, 0.0), settle=0.0)  # the chassis front 5 mm in
+        assert sim.contacts()
+        with pytest.raises(BumpedError, match="wall_right"):
+            base.drive(0.1, 0.0, 1.0)
         sim.place(Pose2D(4.305, 3.9, 0.0), settle=0.0)
         base.drive(-0.2, 0.0, 1.0)
-    assert sim.truth_pose().x < 4.2 and not sim.contacts()
+        assert sim.truth_pose().x < 4.2 and not sim.contacts()
+        sim.place(Pose2D(3.8, 3.9, math.pi), settle=0.0)  # backing into the wall
+        with pytest.raises(BumpedError, match="wall_right") as caught:
+            base.drive(-0.3, 0.0, 5.0)
+    assert abs(caught.value.bearing) == pytest.approx(math.pi)
 
 
 def test_a_seized_wheel_stalls() -> None:

@@ -285,7 +285,8 @@ class LaserLocalizedBase(Base):
                 "choose a stop farther from the furniture, or check the map",
             ) from None
         for target in legs:
-            self._drive_leg(target, timeout)
+            if not self._drive_leg(target, goal, timeout):
+                return  # it met something, and went on to ``goal`` by a new plan
 
     def _legs(self, here: Pose2D, goal: Pose2D) -> list[Pose2D]:
         """The planned waypoints as poses: each faces along its next leg, the last the goal."""
@@ -303,7 +304,10 @@ class LaserLocalizedBase(Base):
                 poses.append(Pose2D(float(x), float(y), goal.yaw))
         return poses
 
-    def _drive_leg(self, target: Pose2D, timeout: float) -> None:
+    def _drive_leg(self, target: Pose2D, goal: Pose2D, timeout: float) -> bool:
+        """Drive one leg to ``target``; True when it got there. After a touch (or a stall) the
+        base backs off and plans again to ``goal``, the leg's own end may lie in what it felt
+        (a door's middle, with a crate before it): False once that new plan is driven."""
         here = self.pose()
         blocked = self._blocked_by_scan(here, target)
         if blocked is not None:
@@ -337,9 +341,10 @@ class LaserLocalizedBase(Base):
             behind = bearing is not None and abs(float(wrap_angle(bearing))) > math.pi / 2
             self.inner.drive(0.1 if behind else -0.1, 0.0, BACK_OFF_M / 0.1)
             self._settle()
-            self._drive_path(self.pose(), target, timeout)
-            return
+            self._drive_path(self.pose(), goal, timeout)
+            return False
         self._settle()
+        return True
 
     def _blocked_by_scan(self, here: Pose2D, target: Pose2D) -> tuple[float, float] | None:
         """A return of the newest scan inside the leg's corridor (the robot's width plus the

@@ -183,6 +183,7 @@ class SimRobot:
         self._head_speed = [self.head_limits.pan_speed, self.head_limits.tilt_speed]
         self._wheels = (0.0, 0.0)
         self._speed = 0.0
+        self._touching_at_start: set[tuple[str, str]] = set()
         # called after every physics step (recorders, wire-protocol emulators, tests)
         self.listeners: list[Callable[[SimRobot], None]] = []
         # Held while stepping and rendering: the serial twins step the world from a thread.
@@ -373,7 +374,7 @@ class SimRobot:
         dt = self.world.timestep
         end = self.world.time + timeout
         asked = f"go to {_fmt(goal)}"
-        self.stall.reset()
+        self._begin()
         while not controller.done:
             if self.world.time >= end:
                 self.set_wheel_speeds(0.0, 0.0)
@@ -413,6 +414,11 @@ class SimRobot:
             return DeviceFaultError(*args)
         return BumpedError(*args, bearing=bearing)
 
+    def _begin(self) -> None:
+        """A drive begins: the stall monitor starts afresh, and the touches felt now are known."""
+        self.stall.reset()
+        self._touching_at_start = {(t.robot_geom, t.scene_geom) for t in self.contacts()}
+
     def _guard(self, asked: str) -> None:
         """Raise ``DeviceFaultError`` if the robot touches the scene (anything but the floor) or
         a wheel motor stalls; called after every physics step of a drive.
@@ -420,18 +426,19 @@ class SimRobot:
         The stall is like the Pioneer's flag (motor current, ``StallMonitor``), not a position
         check: the wheels slip against an obstacle, so odometry alone would think the base moves.
         A touch is caught at once, even one that turns the base without straining the motors.
-        Except one the base drives straight away from (a bumper behind it while it goes
-        forward, or ahead while it backs): as the firmware's bump stall, which stops travel
-        toward a pressed bumper only. A base resting against a crate otherwise could never
-        leave it: every later drive, away from it too, failed at its first step.
+        A touch the base already felt when the drive began (``_begin``) stops it only while it
+        drives into it, as the firmware's bump stall stops travel toward a pressed bumper: a
+        base at rest against a crate otherwise could never leave it (every later drive, away
+        from it too, failed at its first step). A jam still stalls the motors.
         """
         touches = self.contacts()
         if touches:
             pose = self.truth_pose()
             for touch in touches:
                 bearing = bumper_bearing(pose, touch)
-                if self._speed * math.cos(bearing) < -1e-6 * abs(self._speed):
-                    continue  # leaving it
+                known = (touch.robot_geom, touch.scene_geom) in self._touching_at_start
+                if known and self._speed * math.cos(bearing) <= 1e-6 * abs(self._speed):
+                    continue  # resting against it, and not pushing on
                 raise self._fault(
                     asked, f"contact: {touch.describe()}, truth pose {_fmt(pose)}", bearing
                 )
@@ -447,7 +454,7 @@ class SimRobot:
     def drive(self, speed: float, turn_rate: float, duration: float) -> Pose2D:
         """Hold body speed (m/s) and turn rate (rad/s) for ``duration`` seconds, then stop."""
         self.set_wheel_speeds(speed, turn_rate)
-        self.stall.reset()
+        self._begin()
         asked = f"drive {speed:.2f} m/s, {turn_rate:.2f} rad/s for {duration:g} s"
         for _ in range(max(0, round(duration / self.world.timestep))):
             self.step()
