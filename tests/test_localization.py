@@ -249,3 +249,26 @@ def test_a_kidnapped_robot_is_found_again():
     assert estimate.localized and metres < 0.05 and degrees < 2.0
     reached = wrapped.go_to(GOALS[1])
     assert pose_error(reached, base.truth)[0] < 0.03
+
+
+def test_after_a_bump_the_base_plans_again_to_its_goal_not_to_the_legs_end():
+    """A toy on the first leg's end (a corner of the path: in a home, a door's middle): the
+    disc the base marks for what it felt covers that waypoint, so it plans again to the goal
+    itself, round the toy, and arrives."""
+    goal = Pose2D(5.0, 2.3, 0.0)  # behind the blob mid-room, seen from the start
+    probe = LaserLocalizedBase(
+        MiscalibratedBase(START), RoomLaser(MiscalibratedBase(START), room()), room(),
+        LocalizerSettings(seed=3), START,
+    )  # fmt: skip
+    legs = probe._legs(START, goal)
+    assert len(legs) >= 2  # the path bends: its first leg ends short of the goal
+    corner = (legs[0].x, legs[0].y)
+    base = ToyOnTheFloorBase(START, corner, radius=0.08)  # a toy car
+    laser = RoomLaser(base, room())
+    wrapped = LaserLocalizedBase(base, laser, room(), LocalizerSettings(seed=3), START)
+    base.connect()
+    laser.connect()
+    reached = wrapped.go_to(goal)
+    assert base.bumps >= 1
+    assert pose_error(reached, goal)[0] < 0.05
+    assert not wrapped.planner.leg_is_clear(corner, corner)

@@ -369,7 +369,12 @@ class PathPlanner:
                 self.map, x - reach, y - reach, x + reach, y + reach, self.unknown_is_obstacle
             )
             face = float(np.min(_segment_box_distances(x, y, x, y, *boxes), initial=reach))
-            where = "inside an obstacle" if face == 0.0 else f"{face:.2f} m from an obstacle"
+            felt = [math.hypot(x - ox, y - oy) - r for ox, oy, r in self.added]
+            if felt and min(felt) < face:  # what a bumper felt, not the map, is nearest
+                face = max(0.0, min(felt))
+                where = f"{face:.2f} m from what the bumper felt"
+            else:
+                where = "inside an obstacle" if face == 0.0 else f"{face:.2f} m from an obstacle"
             raise InputError(
                 f"{name} ({x:.2f}, {y:.2f}) m is {where}, closer than the robot's radius "
                 f"{self.radius:.2f} m + margin {self.margin:.2f} m; {self._nearest_free(x, y)}"
