@@ -12,6 +12,7 @@ sees (x, y). A map drawn the right way round shows every map point where the map
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import os
 import signal
@@ -587,3 +588,19 @@ def test_localization_draws_the_map_the_scan_at_the_pose_and_the_particles(tmp_p
     np.testing.assert_allclose(dots, particles[:, :2], atol=1e-6)
     (cells,) = seen_2d(rec, "/top/map/occupancy", 0, "Points2D:positions")
     assert len(cells) == 20 and np.allclose(cells.mean(axis=0), (1.25, 5.05), atol=1e-6)
+
+
+def test_a_view_not_taken_for_an_object_draws_no_wedges_for_it(tmp_path) -> None:
+    """The floor sweep's views are fused into the floor's objects only: the viewer draws no
+    wedges for the others at those views, as though they had counted (it clears them)."""
+    path = tmp_path / "sweep.rrd"
+    grid = make_grid()
+    recorder = RerunRecorder("save", path)
+    recorder.begin(make_scene(), grid, 3)
+    for record, _ in synthetic_views(grid, 3):
+        looked_for = ("toy_crate",) if record.index == 1 else None
+        recorder.log_view(dataclasses.replace(record, looked_for=looked_for), grid)
+    recorder.end()
+    rec = read_recording(path)
+    assert rec.views_of(f"/world/wedges/{NAME}", "Mesh3D:vertex_positions") == [0, 2]
+    assert rec.views_of(f"/world/wedges/{NAME}", "Clear:is_recursive") == [1]  # cleared there

@@ -79,7 +79,9 @@ class LocalizingBase(Protocol):
 
 class ViewTarget(Protocol):
     """Where one view is taken from: the base's pose (map frame), the head's pan and tilt
-    (radians, pan positive left), and the stop of a plan it belongs to (for progress)."""
+    (radians, pan positive left), and the stop of a plan it belongs to (for progress). A target
+    with an ``objects`` attribute (``PlannedView``'s floor sweep) is a view for those objects
+    only; without one, or None, for all."""
 
     @property
     def stop(self) -> int: ...
@@ -303,7 +305,7 @@ class Mission:
         supports: SupportLevels | None = getattr(visibility, "supports", None)
         kinds = dict(stands_on or {})
         self.supports: dict[str, SupportLevels | None] = {
-            name: supports.of_kinds(kinds[name]) if supports and kinds.get(name) else supports
+            name: supports.of_kinds(kinds[name]) if supports is not None and kinds.get(name) else supports
             for name in names
         }
         self.object_height: float = getattr(visibility, "object_height", 0.2)
@@ -368,7 +370,7 @@ class Mission:
         index = state.views_done
         per_object = {name: values[i] for i, name in enumerate(self._names)}
         # A view for some objects only (the floor sweep) says nothing about the others.
-        wanted = getattr(target, "objects", None)
+        wanted: tuple[str, ...] | None = getattr(target, "objects", None)
         unscored = np.full(len(wedges), np.nan)
         logged_values = {
             name: per_object[name] if wanted is None or name in wanted else unscored
@@ -435,6 +437,7 @@ class Mission:
                 )
                 for name, at in located.items()
             },
+            None if wanted is None else tuple(wanted),
         )
         with self._timed("record"):
             self.recorder.log_view(record, self.grid)

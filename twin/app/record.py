@@ -99,6 +99,9 @@ class ViewRecord:
     # object -> where the mission places it now (``Mission.located``); absent: the grid's
     # strongest peak, at an unknown height
     estimates: dict[str, EstimatePoint] = field(default_factory=dict)
+    # the objects the view was taken for (the floor sweep's: the floor's), the only layers it
+    # was fused into; None: all of them
+    looked_for: tuple[str, ...] | None = None
 
 
 @dataclass(frozen=True)
@@ -533,6 +536,10 @@ class RerunRecorder:
             self._log_localization(record.localization, pose)
         self._log_camera(record)
         for name, values in record.column_values.items():
+            if record.looked_for is not None and name not in record.looked_for:
+                # not fused into that layer: no wedges drawn as though it were
+                log(f"world/wedges/{name}", rr.Clear(recursive=False))
+                continue
             self._log_wedges(name, (pose.x, pose.y), record.wedges, values)
         for name in grid.objects:
             self._log_grid(name, grid, record.estimates.get(name))
