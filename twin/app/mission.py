@@ -305,7 +305,9 @@ class Mission:
         supports: SupportLevels | None = getattr(visibility, "supports", None)
         kinds = dict(stands_on or {})
         self.supports: dict[str, SupportLevels | None] = {
-            name: supports.of_kinds(kinds[name]) if supports is not None and kinds.get(name) else supports
+            name: supports
+            if supports is None or not kinds.get(name)
+            else supports.of_kinds(kinds[name])
             for name in names
         }
         self.object_height: float = getattr(visibility, "object_height", 0.2)
