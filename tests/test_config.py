@@ -226,6 +226,16 @@ def test_a_head_on_aux_needs_an_arcos_base_and_a_direct_head_needs_a_port():
         load_config(None, overrides=["robot.pantilt.type=vcc4"])
 
 
+def test_a_follow_up_without_a_map_is_refused_at_load():
+    """Its drives are planned on the localization map: refused before any view, not after."""
+    assert load_config("apartment").search.follow_up_views > 0
+    with pytest.raises(ConfigError, match=r"search.follow_up_views: the follow-up plans"):
+        load_config("apartment", overrides=["robot.base.pose_source=odometry"])
+    config = load_config("apartment", overrides=["robot.base.pose_source=odometry",
+                                                 "search.follow_up_views=0"])  # fmt: skip
+    assert config.localization is None
+
+
 def test_bad_detector_parameters_are_named_at_load(tmp_path):
     message = r"^--set detector.n_clusters: n_clusters must be an integer"
     with pytest.raises(ConfigError, match=message):

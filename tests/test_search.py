@@ -325,3 +325,90 @@ def test_a_search_not_sure_after_its_views_flies_the_fixed_plan(open_floor):
         assert choice.index == -1 and choice.base == plan[k].base and choice.pan == plan[k].pan
         assert "had not settled after 3 views" in choice.why
     assert at(7) is None  # the plan is spent: the search stops with no view left
+
+
+# -- the survey's follow-up --------------------------------------------------------------------
+
+ONE_STOP = ("mission.stops=[[2.5, 3.3]]", "mission.views_per_stop=4", "search.spacing_m=0.8")
+
+
+def survey_argv(out, cache, *sets: str) -> list[str]:
+    argv = ["survey", "--out", str(out), "--quiet"]
+    for setting in (f"run.cache={cache}", "run.rerun=off", *ONE_STOP, *sets):
+        argv += ["--set", setting]
+    return argv
+
+
+def test_a_surveys_follow_up_looks_again_while_in_doubt_within_its_budget(tmp_path, model_cache):
+    """In doubt at any ratio (100): exactly the budget's views after the plan's, each a view
+    the planner chose and said why; in doubt at none (1): not one view more."""
+    from rerun.chunk import RrdReader
+
+    doubtful = tmp_path / "doubtful"
+    sets = ("search.follow_up_views=2", "search.follow_up_ratio=100", "run.rerun=save")
+    assert main(survey_argv(doubtful, model_cache, *sets)) == 0
+    result = json.loads((doubtful / "result.json").read_text())
+    assert result["status"] == "complete" and result["views_planned"] == 4 + 2
+    assert result["views"] == 6 and result["follow_up"]["views"] == 2
+    assert result["follow_up"]["planner"] == "detection"
+    assert result["follow_up"]["stopped"] == "view budget spent (6 views)"
+    store = RrdReader(doubtful / "recording.rrd").store()
+    assert {"/plan/why", "/top/map/plan/next"} <= set(store.schema().entity_paths())
+    sure = tmp_path / "sure"
+    assert main(survey_argv(sure, model_cache, "search.follow_up_views=2",
+                            "search.follow_up_ratio=1")) == 0  # fmt: skip
+    result = json.loads((sure / "result.json").read_text())
+    assert result["views"] == 4 and result["follow_up"]["views"] == 0
+    assert result["follow_up"]["stopped"].startswith("no doubt left")
+
+
+def test_a_surveys_follow_up_resumes_where_it_stopped(tmp_path, model_cache, monkeypatch):
+    """Interrupted after the plan and one follow-up view, the run resumes with the follow-up
+    (the plan is not flown again) and ends with the budget's views."""
+    from twin.app import search
+
+    out = tmp_path / "run"
+    sets = ("search.follow_up_views=2", "search.follow_up_ratio=100")
+    real_take = search.Searcher.take
+
+    def interrupted(self, choice):
+        if self.mission.views_done >= 5:
+            raise KeyboardInterrupt
+        return real_take(self, choice)
+
+    monkeypatch.setattr(search.Searcher, "take", interrupted)
+    assert main(survey_argv(out, model_cache, *sets)) != 0
+    assert json.loads((out / "result.json").read_text())["views"] == 5
+    monkeypatch.setattr(search.Searcher, "take", real_take)
+    assert main(["survey", "--resume", str(out), "--quiet"]) == 0
+    result = json.loads((out / "result.json").read_text())
+    assert result["status"] == "complete" and result["views"] == 6
+    assert result["follow_up"]["views"] == 1  # this session's: the plan was not flown again
+
+
+def test_doubts_weigh_the_peaks_that_come_within_the_ratio_equally():
+    """An object whose peaks read 0.6, 0.5, 0.3 is in doubt between the first two at ratio 1.5
+    (0.3 is not within it), and not in doubt at ratio 1.1; one at 0.9 over 0.3 is in none. A
+    chosen peak that is not the strongest is the one compared, and the stronger one passed
+    over (its height fits no surface there) is no contender."""
+    from types import SimpleNamespace
+
+    from twin.app.mission import Located
+    from twin.app.search import doubts
+    from twin.core.grid import AccumulatorGrid, Peak, Peaks
+
+    grid = AccumulatorGrid(["box", "tin"], GridSpec(0.0, 0.0, 2.0, 2.0, 0.1))
+    box = Peaks((Peak(3, 3, 0.35, 0.35, 0.6), Peak(15, 4, 0.45, 1.55, 0.5),
+                 Peak(9, 9, 0.95, 0.95, 0.3)))  # fmt: skip
+    tin = Peaks((Peak(1, 1, 0.15, 0.15, 0.9), Peak(12, 12, 1.25, 1.25, 0.3)))
+    located = {"box": Located(box.peaks[0], None, box), "tin": Located(tin.peaks[0], None, tin)}
+    mission = SimpleNamespace(grid=grid, located=lambda separation: located)
+    out = doubts(mission, 1.5, 0.5)
+    assert set(out) == {"box"}
+    assert out["box"][3, 3] == out["box"][15, 4] == 0.5 and out["box"].sum() == 1.0
+    assert doubts(mission, 1.1, 0.5) == {}
+    passed_over = {"box": Located(box.peaks[1], None, box, ((box.peaks[0], 1.9),))}
+    mission = SimpleNamespace(grid=grid, located=lambda separation: passed_over)
+    assert doubts(mission, 1.5, 0.5) == {}  # 0.5 over its next, 0.3: 1.67
+    chosen = doubts(mission, 2.0, 0.5)["box"]
+    assert chosen[15, 4] == chosen[9, 9] == 0.5 and chosen[3, 3] == 0.0

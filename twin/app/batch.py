@@ -291,7 +291,7 @@ def run_batch_mission(spec: BatchSpec, run: int) -> dict[str, Any]:
     """One randomized mission (the task a worker runs); returns its JSON-ready result."""
     from twin.app.mission import Mission
     from twin.app.run import make_grids
-    from twin.app.search import path_length
+    from twin.app.search import follow_up, path_length
     from twin.app.survey import plan_views, run_survey
     from twin.app.visibility_models import build_height_check
 
@@ -336,6 +336,9 @@ def run_batch_mission(spec: BatchSpec, run: int) -> dict[str, Any]:
                                  "unreachable": searcher.unreachable}}  # fmt: skip
         else:
             run_survey(mission, plan)
+            followed = follow_up(config, mission, sim.world, plan)
+            if followed is not None:
+                search = {"follow_up": followed}
     except DeviceError as exc:
         # The robot could not go on (touched something, lost its way): the run is a failed
         # mission, counted as one, and the batch goes on; the error says what happened.

@@ -192,6 +192,21 @@ class SearchOptions:
         "planners fly the mission's fixed plan for the rest of the budget (0: never): it does "
         "not depend on a belief that may be wrong",
     )  # fmt: skip
+    follow_up_views: int = option(
+        0, low=0, high=10000,
+        doc="twin survey and batch-survey: after the fixed plan, up to this many more views of "
+        "the places an object may be while its grid's peaks are close (follow_up_ratio): "
+        "each the view likeliest to see them per second; 0: the fixed plan only",
+    )  # fmt: skip
+    follow_up_ratio: float = option(
+        1.5, low=1.0, high=100.0,
+        doc="the follow-up looks again while an object's first peak is less than this many "
+        "times its next, at the peaks that come within it",
+    )  # fmt: skip
+    follow_up_range_m: float = option(
+        2.5, unit="m", low=0.5, high=100.0,
+        doc="the follow-up's views are taken within this distance of a place it looks at",
+    )  # fmt: skip
     temperature: float = option(
         2.0, low=0.01, high=1000.0,
         doc="the confidence's temperature during a search: the views a search chooses return "
@@ -524,6 +539,12 @@ def parse_config(
         )
     confidence = _typed(root, "confidence", ConfidenceOptions)
     search = _typed(root, "search", SearchOptions)
+    if search.follow_up_views > 0 and localization is None:
+        raise root.fail(
+            "search.follow_up_views",
+            "the follow-up plans its drives on the localization map: set "
+            'robot.base.pose_source = "laser" (with a [localization] map), or set it to 0',
+        )
     root.finish()
     return SurveyConfig(
         source,

@@ -278,12 +278,16 @@ def _fly(config, robot, context, run, resume, started, quiet, on_result) -> dict
         stands_on={obj.name: obj.stands_on for obj in config.objects},
     )
     searcher = None
+    follow_views = 0
     if options.mission == "search":
         from twin.app.search import make_searcher
 
         searcher = make_searcher(config, mission, world, plan, say)
         scene = replace(scene, planner=config.search.planner)
-    total = config.search.max_views if searcher is not None else len(plan)
+    elif config.search.follow_up_views > 0:
+        follow_views = config.search.follow_up_views
+        scene = replace(scene, planner="detection, after the plan")
+    total = config.search.max_views if searcher is not None else len(plan) + follow_views
     setup_time = time.perf_counter() - setup_started
     n_stops = len(config.mission.stops)
     bar = tqdm(
@@ -302,12 +306,22 @@ def _fly(config, robot, context, run, resume, started, quiet, on_result) -> dict
             bar.set_description(f"place {view.stop + 1}")
             recorder.log_choice(mission.views_done, view, searcher.candidates)
 
+    def on_follow_up(choice, candidates) -> None:  # a view the survey's follow-up chose
+        bar.update(mission.views_done - bar.n)
+        bar.set_description("follow-up")
+        recorder.log_choice(mission.views_done, choice, candidates)
+
     status, stopped_by, stop_reason = "complete", None, None
+    followed = None
     try:
         recorder.begin(scene, grid, total)
         with robot, bar:
             if searcher is None:
-                run_survey(mission, plan, on_view)
+                run_survey(mission, plan, on_view, beyond=follow_views)
+                if follow_views:
+                    from twin.app.search import follow_up
+
+                    followed = follow_up(config, mission, world, plan, say, on_follow_up)
             else:
                 stop_reason = searcher.run(on_view)
             bar.update(mission.views_done - bar.n)
@@ -339,6 +353,8 @@ def _fly(config, robot, context, run, resume, started, quiet, on_result) -> dict
     extra = None
     if searcher is not None:
         extra = _search_results(config, stop_reason, searcher.unreachable)
+    elif followed is not None:
+        extra = {"follow_up": followed}
     result = _write_results(
         config, mission, scene, out, options, status, total, setup_time, started, extra
     )

@@ -120,15 +120,19 @@ def run_survey(
     mission: Mission,
     plan: Sequence[PlannedView],
     on_view: Callable[[PlannedView], None] | None = None,
+    beyond: int = 0,
 ) -> None:
     """Observe every view of ``plan`` the mission has not taken yet (all of them, unless it was
     resumed from a checkpoint); ``on_view`` sees each before it is taken. A stop whose place
-    the base cannot reach (``NotReachedError``) has its views skipped (``Mission.skip``)."""
+    the base cannot reach (``NotReachedError``) has its views skipped (``Mission.skip``).
+    ``beyond``: views a follow-up search may take after the plan (``search.follow_up_views``),
+    which a resumed run may already hold."""
     done = mission.views_done
-    if done > len(plan):
+    if done > len(plan) + beyond:
         raise TwinError(
-            f"the run holds {done} views but its plan has {len(plan)}; "
-            "resume with the config the run started with"
+            f"the run holds {done} views but its plan has {len(plan)}"
+            + (f" and its follow-up {beyond}" if beyond else "")
+            + "; resume with the config the run started with"
         )
     unreachable: dict[int, str] = {}  # stop -> why its place was not reached
     for planned in plan[done:]:

@@ -115,6 +115,12 @@ def print_summary(out: Path, result: dict) -> None:
             f"{result.get('path_length_m', float('nan')):.1f} m driven, "
             f"{result['time_s']:.0f} s of robot time; stopped: {search['stopped']}"
         )
+    if "follow_up" in result:
+        followed = result["follow_up"]
+        print(
+            f"after the plan, {followed['views']} {followed['planner']} views; "
+            f"stopped: {followed['stopped']}"
+        )
     timings = result["timings_s"]
     print("time (s): " + ", ".join(f"{k} {v:.1f}" for k, v in timings.items() if not math.isnan(v)))
     print(f"wrote {out}")
