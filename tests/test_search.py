@@ -352,8 +352,18 @@ def test_a_surveys_follow_up_looks_again_while_in_doubt_within_its_budget(tmp_pa
     assert result["views"] == 6 and result["follow_up"]["views"] == 2
     assert result["follow_up"]["planner"] == "detection"
     assert result["follow_up"]["stopped"] == "view budget spent (6 views)"
-    store = RrdReader(doubtful / "recording.rrd").store()
-    assert {"/plan/why", "/top/map/plan/next"} <= set(store.schema().entity_paths())
+    reader = RrdReader(doubtful / "recording.rrd")
+    assert {"/plan/why", "/top/map/plan/next"} <= set(reader.store().schema().entity_paths())
+    said = [
+        line
+        for chunk in reader.stream()
+        if chunk.entity_path == "/plan/why"
+        for (line,) in chunk.to_record_batch().column("TextLog:text").to_pylist()
+    ]
+    assert len(said) == 2, said
+    assert all("rice_box's contenders" in line for line in said), said
+    seen = [int(line.split(" % of rice_box")[0].rsplit(" ", 1)[1]) for line in said]
+    assert all(0 <= share <= 100 for share in seen), said  # a cell seen twice is seen once
     sure = tmp_path / "sure"
     assert main(survey_argv(sure, model_cache, "search.follow_up_views=2",
                             "search.follow_up_ratio=1")) == 0  # fmt: skip

@@ -183,6 +183,7 @@ class Situation:
     observed: np.ndarray | None = None  # (ny, nx) views' seen share per cell, summed
     # (n_cells, headings): how often each cell was seen facing each heading (share-weighted)
     repeats: np.ndarray | None = None
+    sought_as: str = "belief"  # what ``posteriors`` are, in a planner's words
 
 
 class Planner(Protocol):
@@ -255,9 +256,12 @@ class GainPlanner:
         heading = math.degrees(self.candidates.heading_of(best))
         span = self.candidates.footprints.entries_of(best)
         prints = self.candidates.footprints
+        # a cell in two overlapping columns' wedges is still seen once: at most all of it
+        cells_seen, where = np.unique(prints.cells[span], return_inverse=True)
+        shares = np.minimum(np.bincount(where, weights=prints.share[span]), 1.0)
         seen = [
-            f"{100 * float(cells.ravel()[prints.cells[span]] @ prints.share[span]):.0f} % of "
-            f"{name}'s belief"
+            f"{100 * float(cells.ravel()[cells_seen] @ shares):.0f} % of "
+            f"{name}'s {situation.sought_as}"
             for name, cells in situation.posteriors.items()
         ]
         why = (
@@ -689,6 +693,7 @@ class DoubtSearcher(Searcher):
     def situation(self) -> Situation:
         situation = super().situation()
         situation.posteriors = doubts(self.mission, self.ratio, self.peak_separation)
+        situation.sought_as = "contenders"
         # Only from near a contender: from across the flat a box is a few pixels, its score
         # under the room's (the development run that lost its coffee-table box so: 4 views
         # from 4 m, each taking from the truth's cell what the room there usually gains).
