@@ -422,3 +422,30 @@ def test_doubts_weigh_the_peaks_that_come_within_the_ratio_equally():
     assert doubts(mission, 1.5, 0.5) == {}  # 0.5 over its next, 0.3: 1.67
     chosen = doubts(mission, 2.0, 0.5)["box"]
     assert chosen[15, 4] == chosen[9, 9] == 0.5 and chosen[3, 3] == 0.0
+
+
+def test_a_follow_up_weighs_each_contender_by_the_looks_it_has_had():
+    """Each view adds what it sees, a look-alike's score too: once the follow-up has looked at
+    one contender, the other weighs more, until both have had their look."""
+    from types import SimpleNamespace
+
+    from twin.app.mission import Located
+    from twin.app.search import DoubtSearcher
+    from twin.core.grid import AccumulatorGrid, Peak, Peaks
+
+    grid = AccumulatorGrid(["box"], GridSpec(0.0, 0.0, 4.0, 4.0, 0.1))
+    near, far = Peak(5, 5, 0.55, 0.55, 0.6), Peak(35, 5, 0.55, 3.55, 0.5)
+    peaks = Peaks((near, far))
+    mission = SimpleNamespace(grid=grid, located=lambda _: {"box": Located(near, None, peaks)})
+    searcher = DoubtSearcher.__new__(DoubtSearcher)
+    searcher.mission, searcher.ratio, searcher.peak_separation = mission, 1.5, 0.5
+    searcher._seen_before = {"box": grid.observed("box")}
+    even = searcher.contenders()["box"]
+    assert even[5, 5] == even[35, 5] == 0.5
+    # a look from beside the near contender, toward it (a wedge of 0.2 rad)
+    bearing = math.atan2(0.55 - 0.2, 0.55 - 0.2)
+    wedge = np.array([[bearing - 0.1, bearing + 0.1]])
+    grid.fuse_all((0.2, 0.2), wedge, {"box": np.ones(1)}, max_range=1.0)
+    assert grid.observed("box")[5, 5] > 0.5 and grid.observed("box")[35, 5] == 0.0
+    looked = searcher.contenders()["box"]
+    assert looked[35, 5] > 0.6 > looked[5, 5] > 0.0 and looked.sum() == pytest.approx(1.0)

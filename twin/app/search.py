@@ -689,10 +689,13 @@ class DoubtSearcher(Searcher):
     ) -> None:
         super().__init__(*args, **kwargs)
         self.ratio, self.peak_separation, self.reach = ratio, peak_separation, reach
+        grid = self.mission.grid
+        # A resumed follow-up starts its count afresh: looks before it are the plan's too.
+        self._seen_before = {name: grid.observed(name) for name in grid.objects}
 
     def situation(self) -> Situation:
         situation = super().situation()
-        situation.posteriors = doubts(self.mission, self.ratio, self.peak_separation)
+        situation.posteriors = self.contenders()
         situation.sought_as = "contenders"
         # Only from near a contender: from across the flat a box is a few pixels, its score
         # under the room's (the development run that lost its coffee-table box so: 4 views
@@ -705,6 +708,19 @@ class DoubtSearcher(Searcher):
         headings = len(self.candidates.headings)
         situation.taken = situation.taken | ~np.repeat(near, headings)
         return situation
+
+    def contenders(self) -> dict[str, np.ndarray]:
+        """``doubts``, each contender weighed by 1 / (1 + the full views of it this follow-up
+        has taken): every look adds what it sees to the grid, a look-alike's score too, so a
+        contender looked at more than the others gains on them for that alone (a development
+        run whose box was right after the plan lost it to the desk the follow-up kept
+        looking at, the nearer of the two)."""
+        grid, out = self.mission.grid, {}
+        for name, cells in doubts(self.mission, self.ratio, self.peak_separation).items():
+            looks = np.maximum(grid.observed(name) - self._seen_before[name], 0.0)
+            weighed = cells / (1.0 + looks)
+            out[name] = weighed / weighed.sum()
+        return out
 
     def stop_reason(self) -> str | None:
         if not doubts(self.mission, self.ratio, self.peak_separation):
