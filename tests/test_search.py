@@ -341,7 +341,7 @@ def survey_argv(out, cache, *sets: str) -> list[str]:
 
 def test_a_surveys_follow_up_looks_again_while_in_doubt_within_its_budget(tmp_path, model_cache):
     """In doubt at any ratio (100): exactly the budget's views after the plan's, each a view
-    the planner chose and said why; in doubt at none (1): not one view more."""
+    the planner chose and said why."""
     from rerun.chunk import RrdReader
 
     doubtful = tmp_path / "doubtful"
@@ -364,12 +364,6 @@ def test_a_surveys_follow_up_looks_again_while_in_doubt_within_its_budget(tmp_pa
     assert all("rice_box's contenders" in line for line in said), said
     seen = [int(line.split(" % of rice_box")[0].rsplit(" ", 1)[1]) for line in said]
     assert all(0 <= share <= 100 for share in seen), said  # a cell seen twice is seen once
-    sure = tmp_path / "sure"
-    assert main(survey_argv(sure, model_cache, "search.follow_up_views=2",
-                            "search.follow_up_ratio=1")) == 0  # fmt: skip
-    result = json.loads((sure / "result.json").read_text())
-    assert result["views"] == 4 and result["follow_up"]["views"] == 0
-    assert result["follow_up"]["stopped"].startswith("no doubt left")
 
 
 def test_a_surveys_follow_up_resumes_where_it_stopped(tmp_path, model_cache, monkeypatch):
@@ -449,3 +443,25 @@ def test_a_follow_up_weighs_each_contender_by_the_looks_it_has_had():
     assert grid.observed("box")[5, 5] > 0.5 and grid.observed("box")[35, 5] == 0.0
     looked = searcher.contenders()["box"]
     assert looked[35, 5] > 0.6 > looked[5, 5] > 0.0 and looked.sum() == pytest.approx(1.0)
+
+
+def test_a_survey_in_no_doubt_takes_no_follow_up_view():
+    """Every object's first peak over the ratio times its next: no view is taken, and no
+    candidate view is priced (no map is needed for it)."""
+    from types import SimpleNamespace
+
+    from twin.app.config import load_config
+    from twin.app.mission import Located
+    from twin.app.search import follow_up
+    from twin.core.grid import AccumulatorGrid, Peak, Peaks
+
+    config = load_config(None, overrides=["search.follow_up_views=2"])
+    grid = AccumulatorGrid(["box"], GridSpec(0.0, 0.0, 4.0, 4.0, 0.1))
+    peaks = Peaks((Peak(5, 5, 0.55, 0.55, 0.9), Peak(35, 5, 0.55, 3.55, 0.5)))
+    mission = SimpleNamespace(
+        grid=grid, located=lambda _: {"box": Located(peaks.peaks[0], None, peaks)}, views_done=4
+    )
+    done = follow_up(config, mission, world=None, plan=[])
+    assert done == {"planner": "detection", "stopped": "no doubt left (every object's first "
+                    "peak over 1.5x its next)", "views": 0, "unreachable": []}  # fmt: skip
+    assert follow_up(load_config(None), mission, world=None, plan=[]) is None  # none asked
