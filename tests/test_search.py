@@ -430,10 +430,12 @@ def test_a_follow_up_weighs_each_contender_by_the_looks_it_has_had():
     grid = AccumulatorGrid(["box"], GridSpec(0.0, 0.0, 4.0, 4.0, 0.1))
     near, far = Peak(5, 5, 0.55, 0.55, 0.6), Peak(35, 5, 0.55, 3.55, 0.5)
     peaks = Peaks((near, far))
-    mission = SimpleNamespace(grid=grid, located=lambda _: {"box": Located(near, None, peaks)})
-    searcher = DoubtSearcher.__new__(DoubtSearcher)
+    mission = SimpleNamespace(
+        grid=grid, located=lambda _: {"box": Located(near, None, peaks)}, views_done=0
+    )
+    searcher = DoubtSearcher.__new__(DoubtSearcher)  # its planning parts are not needed here
     searcher.mission, searcher.ratio, searcher.peak_separation = mission, 1.5, 0.5
-    searcher._seen_before = {"box": grid.observed("box")}
+    searcher._seen_before, searcher._doubts = {"box": grid.observed("box")}, None
     even = searcher.contenders()["box"]
     assert even[5, 5] == even[35, 5] == 0.5
     # a look from beside the near contender, toward it (a wedge of 0.2 rad)
@@ -465,3 +467,19 @@ def test_a_survey_in_no_doubt_takes_no_follow_up_view():
     assert done == {"planner": "detection", "stopped": "no doubt left (every object's first "
                     "peak over 1.5x its next)", "views": 0, "unreachable": []}  # fmt: skip
     assert follow_up(load_config(None), mission, world=None, plan=[]) is None  # none asked
+
+
+def test_a_follow_up_needs_every_model_calibrated():
+    """It weighs views by each model's detection rates: a model without a calibration is named,
+    with the remedy, in one line."""
+    from types import SimpleNamespace
+
+    from twin.app.search import check_follow_up
+    from twin.core.errors import InputError
+
+    calibration = ScoreCalibration((0.0, 0.5, 1.0), (10, 90), (90, 10))
+    calibrated = SimpleNamespace(name="box", calibration=calibration)
+    check_follow_up(SimpleNamespace(models=[calibrated]))
+    bare = SimpleNamespace(name="tin", calibration=None)
+    with pytest.raises(InputError, match=r"'tin' has none: store one with 'twin roc --store'"):
+        check_follow_up(SimpleNamespace(models=[calibrated, bare]))

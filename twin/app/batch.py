@@ -396,10 +396,15 @@ class BatchJournal:
 
 def prepare(spec: BatchSpec, say: Callable[[str], None] = print) -> None:
     """Train (or load) the detector once here, before workers start, so local workers find it
-    cached instead of each training it."""
+    cached instead of each training it; and refuse a follow-up it cannot weigh views for
+    (``check_follow_up``) before any run."""
     from twin.app.detection import mission_detector
+    from twin.app.search import check_follow_up
 
-    mission_detector(spec.load(), say)
+    config = spec.load()
+    detector, _ = mission_detector(config, say)
+    if spec.mission == "survey" and config.search.follow_up_views > 0:
+        check_follow_up(detector)
 
 
 def run_batch(

@@ -285,6 +285,9 @@ def _fly(config, robot, context, run, resume, started, quiet, on_result) -> dict
         searcher = make_searcher(config, mission, world, plan, say)
         scene = replace(scene, planner=config.search.planner)
     elif config.search.follow_up_views > 0:
+        from twin.app.search import check_follow_up
+
+        check_follow_up(detector)
         follow_views = config.search.follow_up_views
         scene = replace(scene, planner="detection, after the plan")
     total = config.search.max_views if searcher is not None else len(plan) + follow_views

@@ -623,8 +623,10 @@ def make_searcher(
             "twin search plans its drives on the localization map: set robot.base.pose_source "
             '= "laser" (with a [localization] map)'
         )
-    needs_belief = options.planner in ("information", "detection")
     models = {m.name: m for m in mission.detector.models}
+    if follow_up:
+        check_follow_up(mission.detector)
+    needs_belief = options.planner in ("information", "detection") and not follow_up
     missing = [name for name, m in models.items() if m.calibration is None]
     if needs_belief and (missing or mission.belief is None):
         raise InputError(
@@ -692,6 +694,15 @@ class DoubtSearcher(Searcher):
         grid = self.mission.grid
         # A resumed follow-up starts its count afresh: looks before it are the plan's too.
         self._seen_before = {name: grid.observed(name) for name in grid.objects}
+        self._doubts: tuple[int, dict[str, np.ndarray]] | None = None
+
+    def doubts(self) -> dict[str, np.ndarray]:
+        """``doubts`` of the mission as it stands (once per view: the stop rule and the
+        planner both ask, and each asks ``Mission.located`` over the whole view log)."""
+        done = self.mission.views_done
+        if self._doubts is None or self._doubts[0] != done:
+            self._doubts = (done, doubts(self.mission, self.ratio, self.peak_separation))
+        return self._doubts[1]
 
     def situation(self) -> Situation:
         situation = super().situation()
@@ -716,18 +727,30 @@ class DoubtSearcher(Searcher):
         run whose box was right after the plan lost it to the desk the follow-up kept
         looking at, the nearer of the two)."""
         grid, out = self.mission.grid, {}
-        for name, cells in doubts(self.mission, self.ratio, self.peak_separation).items():
+        for name, cells in self.doubts().items():
             looks = np.maximum(grid.observed(name) - self._seen_before[name], 0.0)
             weighed = cells / (1.0 + looks)
             out[name] = weighed / weighed.sum()
         return out
 
     def stop_reason(self) -> str | None:
-        if not doubts(self.mission, self.ratio, self.peak_separation):
+        if not self.doubts():
             return no_doubt(self.ratio)
         if self.mission.views_done >= self.rule.max_views:
             return f"view budget spent ({self.rule.max_views} views)"
         return None
+
+
+def check_follow_up(detector: Any) -> None:
+    """Before a survey flies: its follow-up weighs views by each model's detection rates (its
+    score calibration), so refuse a detector whose models lack one now, not after the plan."""
+    missing = [m.name for m in detector.models if m.calibration is None]
+    if missing:
+        raise InputError(
+            f"search.follow_up_views weighs views by the detector's calibration, and "
+            f"{missing[0]!r} has none: store one with 'twin roc --store' (or give the object a "
+            "scene body to calibrate it in the twin), or set search.follow_up_views = 0"
+        )
 
 
 def no_doubt(ratio: float) -> str:
