@@ -352,3 +352,18 @@ def test_a_floor_sweep_looks_for_the_objects_that_stand_on_the_floor():
         with pytest.raises(ConfigError, match=key) as caught:
             load_config("apartment", overrides=[stops, bad])
         assert "\n" not in str(caught.value)
+
+
+def test_each_object_may_say_how_tall_it_is():
+    """``[objects.X] object_height_m``: an object's own height, else the visibility model's;
+    a height that is no height is refused in one line that names the key."""
+    config = load_config("apartment")
+    assert config.object_heights == {
+        "rice_box": 0.30, "tea_tin": 0.14, "game_box": 0.22, "toy_crate": 0.25,
+    }  # fmt: skip
+    board = load_config("calibration_board", overrides=["visibility.object_height_m=0.4"])
+    assert board.object_heights == {"calibration_board": 0.4}
+    for bad in ("0", "-0.3", "4.0", '"tall"'):
+        with pytest.raises(ConfigError, match="object_height_m") as caught:
+            load_config("apartment", overrides=[f"objects.rice_box.object_height_m={bad}"])
+        assert "\n" not in str(caught.value)

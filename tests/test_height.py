@@ -17,6 +17,7 @@ from twin.core.geometry import CameraModel
 from twin.core.grid import AccumulatorGrid, GridSpec
 from twin.core.height import (
     HeightCheck,
+    HeightEstimate,
     best_patch_elevations,
     estimate_height,
     height_fits,
@@ -208,13 +209,16 @@ def test_a_peak_whose_height_fits_no_surface_there_is_passed_over():
     supports = SupportLevels(0.0, 0.0, 0.1, levels)
     plain = locate(grid, "box", 0.5, log)
     assert math.hypot(plain.peak.x - 2.0, plain.peak.y - 3.0) < 0.25  # the look-alike wins
-    found = locate(grid, "box", 0.5, log, supports, object_height=0.2)
+    found = locate(grid, "box", 0.5, log, supports, object_height=0.3)
     assert math.hypot(found.peak.x - 6.0, found.peak.y - 3.0) < 0.25
     assert found.height is not None and found.height.z == pytest.approx(0.6, abs=0.05)
     [(passed, z)] = found.passed_over
     assert (passed.x, passed.y) == (plain.peak.x, plain.peak.y) and z == pytest.approx(1.3, 0.05)
-    entry = estimates(grid, {"box": (6.0, 3.0, 0.6)}, 0.5, log, supports)["box"]
+    entry = estimates(grid, {"box": (6.0, 3.0, 0.6)}, 0.5, log, supports, 0.3)["box"]
     assert entry["error_m"] < 0.25 and entry["height_error_m"] < 0.05
+    # it stands on the table: 0.15 m above it, and the rows' own answer is kept beside
+    assert entry["stands_on_m"] == 0.45 and entry["estimate_m"][2] == pytest.approx(0.6)
+    assert entry["height_measured_m"] == pytest.approx(0.6, abs=0.05)
     assert entry["passed_over"][0]["z_m"] == pytest.approx(1.3, abs=0.05)
     assert entry["peak_ratio"] is None or entry["peak_ratio"] >= 1.0
 
@@ -289,3 +293,34 @@ def test_an_object_known_to_stand_on_the_floor_is_not_the_peak_on_a_table():
     assert np.isnan(tables.levels[10, 10]).all() and tables.levels[30, 60, 1] == 0.45
     with pytest.raises(InputError, match="sofa"):
         supports.of_kinds(("sofa",))
+
+
+def test_rows_biased_toward_the_surface_still_say_which_surface():
+    """Rows that read a 0.3 m box on a 0.755 m desk 0.2 m low (the desk's wood matches it)
+    put it on the desk, 0.15 m up; rows that fit no surface leave the height as measured;
+    between two shelves the nearer standing centre wins."""
+    measured = HeightEstimate(0.706, 4, 0.07)
+    on_desk = measured.on_surface(np.array([0.0, 0.755, np.nan]), 0.3)
+    assert on_desk.z == pytest.approx(0.905) and on_desk.surface == 0.755
+    assert on_desk.measured == 0.706 and on_desk.views == 4
+    assert measured.on_surface(np.array([0.0, 1.2]), 0.3) == measured  # mid-air: as it was
+    shelves = np.array([[1.1, 1.45], [np.nan, 1.45]])
+    # 1.37 m and 1.41 m fit both shelves (within 0.1 m of 1.1-1.32 and of 1.45-1.67)
+    assert HeightEstimate(1.37, 3, 0.02).on_surface(shelves, 0.22).surface == 1.1
+    assert HeightEstimate(1.41, 3, 0.02).on_surface(shelves, 0.22).surface == 1.45
+    crate = HeightEstimate(0.26, 5, 0.01).on_surface(np.array([0.0]), 0.25)
+    assert crate.z == pytest.approx(0.125) and crate.measured == 0.26
+
+
+def test_without_a_model_of_the_room_the_rows_height_stands():
+    """``SupportLevels.anywhere`` offers every height in 0.2 m steps: no surface to stand on,
+    so ``locate`` keeps the rows' height (a stand-in's level would round it)."""
+    spec = GridSpec(0.0, 0.0, 9.0, 7.0, 0.1)
+    log = _log_of(((6.0, 3.0), 0.67, 1.0))
+    grid = AccumulatorGrid(["box"], spec, make_rule("accumulate"), 4)
+    log.fuse_into(grid)
+    anywhere = SupportLevels.anywhere((0.0, 0.0, 9.0, 7.0))
+    assert not anywhere.surfaces and not anywhere.of_kinds(("table",)).surfaces
+    found = locate(grid, "box", 0.5, log, anywhere, object_height=0.3)
+    assert found.height is not None and found.height.surface is None
+    assert found.height.z == pytest.approx(0.67, abs=0.05)

@@ -320,6 +320,7 @@ def run_batch_mission(spec: BatchSpec, run: int) -> dict[str, Any]:
         confidence_options=config.confidence,
         height_check=build_height_check(config, world.visibility),
         stands_on={obj.name: obj.stands_on for obj in config.objects},
+        object_heights=config.object_heights,
     )
     setup = time.perf_counter() - started
     plan = plan_views(config.mission, world.robot.pantilt.limits, config.floor_objects)

@@ -225,6 +225,9 @@ class ObjectConfig:
     # the kinds of surface it stands on (keys of twin.core.visibility.SUPPORT_KINDS); empty:
     # any. A toy crate that lives on the floor is no look-alike's peak on a desk.
     stands_on: tuple[str, ...] = ()
+    # how tall it stands (m), its own [visibility] object_height_m. Its centre is half this
+    # above the surface it is found on.
+    object_height_m: float | None = None
 
 
 @dataclass(frozen=True)
@@ -276,6 +279,12 @@ class SurveyConfig:
     visibility: VisibilityOptions = field(default_factory=VisibilityOptions)
     confidence: ConfidenceOptions = field(default_factory=ConfidenceOptions)
     search: SearchOptions = field(default_factory=SearchOptions)
+
+    @property
+    def object_heights(self) -> dict[str, float]:
+        """Each object's height (m): its own ``object_height_m``, else ``[visibility]``'s."""
+        default = self.visibility.object_height_m
+        return {obj.name: obj.object_height_m or default for obj in self.objects}
 
     @property
     def floor_objects(self) -> tuple[str, ...]:
@@ -832,8 +841,14 @@ def _objects(table: _Table, folder: Path) -> tuple[ObjectConfig, ...]:
             raise entry.fail(
                 "stands_on", f"expected a list of some of {list(SUPPORT_KINDS)}, got {stands_on!r}"
             )
+        height = entry.number(
+            "object_height_m",
+            None,
+            lambda h: 0.0 < h <= 3.0,
+            "a height in metres, over 0 and up to 3",
+        )
         entry.finish()
-        objects.append(ObjectConfig(name, model, body, tuple(stands_on)))
+        objects.append(ObjectConfig(name, model, body, tuple(stands_on), height))
     table.finish()
     return tuple(objects)
 

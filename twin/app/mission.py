@@ -252,7 +252,9 @@ class Mission:
     ``grid`` (which may hold another rule, or be the same grid), always with the visibility
     when there is a model of it, for each object's ``confidence``, read with
     ``confidence_options``. ``height_check`` weighs each wedge by where its best patches'
-    rows allow the object to stand (``twin.core.height.HeightCheck``).
+    rows allow the object to stand (``twin.core.height.HeightCheck``). ``object_heights``
+    gives each object's own height (m; the visibility model's one for the others): where its
+    rows may put it above a surface, and how high it stands on the one it is found on.
     """
 
     def __init__(
@@ -277,6 +279,7 @@ class Mission:
         views: ViewLog | None = None,
         height_check: HeightCheck | None = None,
         stands_on: Mapping[str, tuple[str, ...]] | None = None,
+        object_heights: Mapping[str, float] | None = None,
     ) -> None:
         names = list(detector.names)
         if sorted(names) != sorted(grid.objects):
@@ -310,7 +313,11 @@ class Mission:
             else supports.of_kinds(kinds[name])
             for name in names
         }
-        self.object_height: float = getattr(visibility, "object_height", 0.2)
+        # Each object's own height (m) where it is known, else the visibility model's one.
+        default_height: float = getattr(visibility, "object_height", 0.2)
+        self.object_heights: dict[str, float] = {
+            name: float((object_heights or {}).get(name, default_height)) for name in names
+        }
         self.confidence_options = confidence_options or ConfidenceOptions()
         self.views = views if views is not None else ViewLog(names, max_range)
         if len(self.views) != self.state.views_done:
@@ -319,7 +326,11 @@ class Mission:
         self.height_check: dict[str, HeightCheck] | None = None
         if height_check is not None:
             self.height_check = {
-                name: replace(height_check, supports=self.supports[name] or height_check.supports)
+                name: replace(
+                    height_check,
+                    supports=self.supports[name] or height_check.supports,
+                    object_height=self.object_heights[name],
+                )
                 for name in names
             }
         self.belief = belief
@@ -533,7 +544,7 @@ class Mission:
                 peak_separation,
                 self.views,
                 self.supports[name],
-                self.object_height,
+                self.object_heights[name],
             )
             for name in self._names
         }
@@ -590,7 +601,9 @@ def locate(
     """The strongest of ``name``'s ``k`` peaks whose height (from ``views``) fits a surface of
     ``supports`` within a cell of it (``twin.core.height.height_fits``); the strongest peak when
     none fits, or without views or supports. Bearings from a few stops also cross in front of
-    a look-alike, on bare floor, and the patch rows then put the object in mid-air."""
+    a look-alike, on bare floor, and the patch rows then put the object in mid-air. When the
+    supports are the room's real surfaces, the chosen peak's object stands on the one its rows
+    fit best (``HeightEstimate.on_surface``)."""
     peaks = grid.peaks(name, k=k, min_separation=min_separation)
 
     def height_at(peak: Peak) -> HeightEstimate | None:
@@ -606,7 +619,10 @@ def locate(
         if height is None:
             return Located(peak, height, peaks, tuple(passed))
         x, y = np.meshgrid(peak.x + offsets, peak.y + offsets)
-        if height_fits(height.z, supports.sample(x, y), object_height):
+        levels = supports.sample(x, y)
+        if height_fits(height.z, levels, object_height):
+            if supports.surfaces:
+                height = height.on_surface(levels, object_height)
             return Located(peak, height, peaks, tuple(passed))
         passed.append((peak, height.z))
     return Located(peaks.best, first, peaks)
@@ -627,7 +643,9 @@ def estimates(
 
     With the mission's ``views``, the estimate is [x, y, z]: z is the object's height from the
     rows its best patches were found in (``ViewLog.height``; None when no view with rows looks
-    toward the estimate), with ``height_views`` and ``height_spread_m``; a truth with z adds
+    toward the estimate), with ``height_views`` and ``height_spread_m``; an object placed on a
+    surface of the room adds the surface's height ``stands_on_m`` and the rows' own height
+    ``height_measured_m`` (``HeightEstimate.on_surface``); a truth with z adds
     ``height_error_m``. ``error_m`` stays the error in the plan. Peaks passed over are listed
     in ``passed_over`` with the height their views gave. ``located`` hands in ``locate``'s
     answers already made (``Mission.located``)."""
@@ -656,6 +674,9 @@ def estimates(
             entry["estimate_m"].append(None if height is None else round(height.z, 4))
             entry["height_views"] = 0 if height is None else height.views
             entry["height_spread_m"] = None if height is None else round(height.spread, 4)
+            if height is not None and height.surface is not None:
+                entry["stands_on_m"] = round(height.surface, 4)
+                entry["height_measured_m"] = round(float(height.measured), 4)
         if truth and name in truth:
             tx, ty = truth[name][:2]
             entry["truth_m"] = [round(float(v), 4) for v in truth[name]]

@@ -276,6 +276,7 @@ def _fly(config, robot, context, run, resume, started, quiet, on_result) -> dict
         views=views,
         height_check=build_height_check(config, visibility),
         stands_on={obj.name: obj.stands_on for obj in config.objects},
+        object_heights=config.object_heights,
     )
     searcher = None
     follow_views = 0
@@ -352,6 +353,7 @@ def _fly(config, robot, context, run, resume, started, quiet, on_result) -> dict
             views=views,
             height_check=build_height_check(config, visibility),
             stands_on={obj.name: obj.stands_on for obj in config.objects},
+            object_heights=config.object_heights,
         )
     extra = None
     if searcher is not None:

@@ -17,7 +17,7 @@ Angles in radians, lengths in metres; elevation is positive above the horizontal
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -82,11 +82,39 @@ def _bump_centres(scores: np.ndarray) -> np.ndarray:
 @dataclass(frozen=True)
 class HeightEstimate:
     """An object's height (m above the floor), the views that voted and the weighted median
-    absolute deviation of their answers (m): how much they agreed."""
+    absolute deviation of their answers (m): how much they agreed. Once placed on a surface
+    (``on_surface``), ``surface`` is that surface's height and ``measured`` what the rows
+    said; both are None before."""
 
     z: float
     views: int
     spread: float
+    surface: float | None = None
+    measured: float | None = None
+
+    def on_surface(
+        self, levels: np.ndarray, object_height: float, tolerance: float = 0.1
+    ) -> HeightEstimate:
+        """The object standing on the surface of ``levels`` (m, NaN ignored) that fits the
+        rows' height (``height_fits``) and whose standing object's centre, ``object_height``
+        / 2 above it, is nearest it; unchanged when none fits.
+
+        Why: the rows are biased toward what the object stands on. A patch that holds the
+        object's lower half and the wooden desk under it matches better than one that holds
+        its upper half and the wall behind it (measured: a rice box on a 0.755 m desk read
+        0.71 m from four views, 0.2 m under its centre, and crates on the floor read 0.24-0.27
+        m for their 0.13 m centre). The rows are still good to a surface: desks, seats and
+        shelves lie further apart than that bias. A robot that knows the room's surfaces
+        knows how high an object on one of them stands."""
+        levels = np.asarray(levels, dtype=float).ravel()
+        levels = np.unique(levels[np.isfinite(levels)])
+        fitting = levels[_fits(np.full(len(levels), self.z), levels[:, None], object_height,
+                               tolerance)]  # fmt: skip
+        if len(fitting) == 0:
+            return self
+        centres = fitting + 0.5 * object_height
+        best = int(np.argmin(np.abs(centres - self.z)))
+        return replace(self, z=float(centres[best]), surface=float(fitting[best]), measured=self.z)
 
 
 def height_fits(z: float, levels: np.ndarray, object_height: float, tolerance: float = 0.1) -> bool:

@@ -151,12 +151,15 @@ class SupportLevels:
     ``levels`` is (ny, nx, k), row 0 at ``y_min``; outside the grid only the floor (0 m) is a
     support. Visibility asks whether an object standing on some support of a cell would have been
     in view; without a model of the room, ``anywhere`` offers every height up to ``max_height``.
+    ``surfaces`` says whether the levels are real surfaces (a model of the room) or that
+    stand-in: only a real surface may say how high an object on it stands.
     """
 
     x_min: float
     y_min: float
     cell_size: float
     levels: np.ndarray
+    surfaces: bool = True
 
     def __post_init__(self) -> None:
         levels = np.asarray(self.levels, dtype=float)
@@ -196,8 +199,9 @@ class SupportLevels:
                 low, high = SUPPORT_KINDS[kind]
                 keep |= (self.levels >= low - 1e-9) & (self.levels <= high + 1e-9)
         return SupportLevels(
-            self.x_min, self.y_min, self.cell_size, np.where(keep, self.levels, np.nan)
-        )
+            self.x_min, self.y_min, self.cell_size, np.where(keep, self.levels, np.nan),
+            self.surfaces,
+        )  # fmt: skip
 
     @classmethod
     def anywhere(
@@ -212,7 +216,8 @@ class SupportLevels:
         nx = max(1, math.ceil((x_max - x_min) / cell_size))
         ny = max(1, math.ceil((y_max - y_min) / cell_size))
         heights = np.arange(0.0, max_height + 1e-9, step)
-        return cls(x_min, y_min, cell_size, np.broadcast_to(heights, (ny, nx, len(heights))))
+        levels = np.broadcast_to(heights, (ny, nx, len(heights)))
+        return cls(x_min, y_min, cell_size, levels, surfaces=False)
 
 
 # Heights up an object (fractions of its height) whose views stand for it: a point near its base,

@@ -353,6 +353,7 @@ class ObjectSearchEnv(gymnasium.Env):
             confidence_options=config.confidence,
             height_check=build_height_check(config, world.visibility),
             stands_on={obj.name: obj.stands_on for obj in config.objects},
+            object_heights=config.object_heights,
         )
 
     def _new_searcher(self, mission: Mission) -> Searcher:
