@@ -479,13 +479,19 @@ def test_ctrl_c_while_serving_the_results_stops_the_server_and_exits_130(tmp_pat
         env={**os.environ, "MUJOCO_GL": "egl"},
     )  # fmt: skip
     assert "serving the recording" in process.stdout.readline()
-    server_groups = {
-        int(line.split()[0])
+    # The survey's own server: a session led by one of its children (other tests, in other
+    # workers, may be serving recordings of their own).
+    table = [
+        line.split(None, 3)
         for line in subprocess.run(
-            ["ps", "-o", "pgid=,args=", "-A"], capture_output=True, text=True
+            ["ps", "-ww", "-o", "pid=,ppid=,pgid=,args=", "-A"], capture_output=True, text=True
         ).stdout.splitlines()
-        if "serve-grpc" in line
-    } - {os.getpgid(0)}
+    ]
+    children = {int(pid) for pid, ppid, *_ in table if int(ppid) == process.pid}
+    server_groups = {
+        int(pgid) for _, _, pgid, args in table if "serve-grpc" in args and int(pgid) in children
+    }
+    assert server_groups, "the survey serves its recording from a server of its own"
     from test_record import group_alive
 
     os.killpg(process.pid, signal.SIGINT)  # what a terminal's Ctrl-C sends to the job
