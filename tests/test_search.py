@@ -364,6 +364,22 @@ def test_a_surveys_follow_up_looks_again_while_in_doubt_within_its_budget(tmp_pa
     assert all("rice_box's contenders" in line for line in said), said
     seen = [int(line.split(" % of rice_box")[0].rsplit(" ", 1)[1]) for line in said]
     assert all(0 <= share <= 100 for share in seen), said  # a cell seen twice is seen once
+    # The layout shows the log once the follow-up chooses (sent again then): first without.
+    layouts = [_view_names(reader.stream(store=store)) for store in reader.blueprints()]
+    why = "why this view (detection, after the plan)"
+    assert any(why in names for names in layouts) and not all(why in n for n in layouts)
+
+
+def _view_names(stream) -> set[str]:
+    """The names of the views in one of a recording's layouts (blueprints)."""
+    names = set()
+    for chunk in stream:
+        batch = chunk.to_record_batch()
+        for column in batch.schema.names:
+            if column.endswith("display_name") or column.endswith(":name"):
+                for value in batch.column(column).to_pylist():
+                    names |= set(value) if isinstance(value, list) else {value}
+    return names
 
 
 def test_a_surveys_follow_up_resumes_where_it_stopped(tmp_path, model_cache, monkeypatch):

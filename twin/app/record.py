@@ -29,7 +29,7 @@ import math
 import os
 import sys
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Protocol
 
@@ -150,6 +150,11 @@ class Recorder(Protocol):
         ``Candidates``."""
         ...
 
+    def explain(self, planner: str) -> None:
+        """From now on ``planner`` chooses the views (a survey's follow-up, once its plan is
+        flown): the layout gains its "why this view" log, if it has none yet."""
+        ...
+
     def flush(self) -> None:
         """Put everything logged so far on disk (or on the wire) before the mission checkpoints,
         so that what the grid checkpoint holds, the recording holds."""
@@ -174,6 +179,9 @@ class NullRecorder:
         pass
 
     def log_choice(self, index: int, choice: Any, candidates: Any) -> None:
+        pass
+
+    def explain(self, planner: str) -> None:
         pass
 
     def flush(self) -> None:
@@ -419,6 +427,8 @@ class RerunRecorder:
         self._peak_separation = 0.0
         self._planned = 0  # views the mission plans (from begin) and the last one logged
         self._last_view = -1
+        self._scene: SceneInfo | None = None
+        self._grid: AccumulatorGrid | None = None
         self.stream = rr.RecordingStream(application_id, recording_id=recording_id)
         if mode == "save":
             if path is None:
@@ -450,6 +460,7 @@ class RerunRecorder:
             )
             for name in grid.objects
         }
+        self._scene, self._grid = scene, grid  # for a layout sent again (``explain``)
         self.stream.send_blueprint(self._blueprint(scene, grid), make_active=True)
         log("world", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
         log(MAP, rr.Transform3D(scale=[1.0, -1.0, 1.0]), static=True)  # north up in 2-D
@@ -572,6 +583,15 @@ class RerunRecorder:
         white = [255, 255, 255]
         self._log_facing(f"{MAP}/plan/next", choice.base, heading, 0.6, 0.035, white, "next view",
                          31.0)  # fmt: skip
+
+    def explain(self, planner: str) -> None:
+        """Send the layout again with the "why this view" log under the map: a survey sends
+        its layout before it flies, when whether a follow-up will choose any view is not
+        known, and an empty log in every recording would say nothing."""
+        if self._scene is None or self._grid is None or self._scene.planner == planner:
+            return
+        self._scene = replace(self._scene, planner=planner)
+        self.stream.send_blueprint(self._blueprint(self._scene, self._grid), make_active=True)
 
     def _log_facing(self, path: str, at: Pose2D, heading: float, length: float, radius: float,
                     colour: list[int], label: str, order: float) -> None:  # fmt: skip

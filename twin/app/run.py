@@ -290,7 +290,6 @@ def _fly(config, robot, context, run, resume, started, quiet, on_result) -> dict
 
         check_follow_up(detector)
         follow_views = config.search.follow_up_views
-        scene = replace(scene, planner="detection, after the plan")
     total = config.search.max_views if searcher is not None else len(plan) + follow_views
     setup_time = time.perf_counter() - setup_started
     n_stops = len(config.mission.stops)
@@ -313,6 +312,7 @@ def _fly(config, robot, context, run, resume, started, quiet, on_result) -> dict
     def on_follow_up(choice, candidates) -> None:  # a view the survey's follow-up chose
         bar.update(mission.views_done - bar.n)
         bar.set_description("follow-up")
+        recorder.explain("detection, after the plan")
         recorder.log_choice(mission.views_done, choice, candidates)
 
     status, stopped_by, stop_reason = "complete", None, None
