@@ -407,6 +407,11 @@ def stop_reason(mission: Mission, rule: StopRule) -> str | None:
         if absent:
             parts.append(f"declared {', '.join(absent)} absent (P >= {rule.absent:g})")
         return "; ".join(parts)
+    return budget_spent(mission, rule)
+
+
+def budget_spent(mission: Mission, rule: StopRule) -> str | None:
+    """Whether the search has spent its views or its robot time, and which."""
     if mission.views_done >= rule.max_views:
         return f"view budget spent ({rule.max_views} views)"
     if mission.state.robot_time >= rule.max_time:
@@ -736,9 +741,7 @@ class DoubtSearcher(Searcher):
     def stop_reason(self) -> str | None:
         if not self.doubts():
             return no_doubt(self.ratio)
-        if self.mission.views_done >= self.rule.max_views:
-            return f"view budget spent ({self.rule.max_views} views)"
-        return None
+        return budget_spent(self.mission, self.rule)
 
 
 def check_follow_up(detector: Any) -> None:
